@@ -1,0 +1,1 @@
+"""Box coders, geometry (corners, point-in-box, rotated IoU) and NMS on numpy/JAX arrays."""

@@ -1,0 +1,13 @@
+"""Pure building blocks (Flax linen). Imports nothing else of the project but `grid`."""
+
+from .activations import ACTIVATIONS, activation
+from .blocks import ConvBNAct, DSConv, ResidualBottleneck
+from .conv import Conv, ConvTranspose, DepthwiseConv, PointLinear, shifted_depthwise
+from .fec import FEC, check_fec_filters
+from .pillars import PillarFeatureNet, decorate_points, masked_max, scatter_to_bev
+
+__all__ = [
+    "ACTIVATIONS", "activation", "ConvBNAct", "DSConv", "ResidualBottleneck", "Conv",
+    "ConvTranspose", "DepthwiseConv", "PointLinear", "shifted_depthwise", "FEC",
+    "check_fec_filters", "PillarFeatureNet", "decorate_points", "masked_max", "scatter_to_bev",
+]

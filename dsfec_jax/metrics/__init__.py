@@ -1,0 +1,9 @@
+"""Detection metrics that judge boxes, whoever made them.
+
+``dsfec_jax.metrics.nuscenes``: the nuScenes detection AP (centre-distance matching, 0.5/1/2/4 m), computed
+exactly as nuscenes-devkit 1.2.0 does, plus the official submission JSON format and a CLI
+(``python -m dsfec_jax.metrics.nuscenes --gt GT.json --pred PRED.json``).
+
+Nothing is re-exported here on purpose: importing the submodule from the package ``__init__`` would make
+``python -m dsfec_jax.metrics.nuscenes`` warn that the module was imported before it ran.
+"""

@@ -1,0 +1,547 @@
+"""The nuScenes detection AP, computed the way nuscenes-devkit 1.2.0 (config ``detection_cvpr_2019``) does.
+
+What the devkit does, and so what this module does (numpy only, no devkit import):
+
+* Matching is by centre distance in the ground plane (x, y only), never IoU, so a radar detector with poor
+  box extents is still credited for finding the object.
+* Per class and distance threshold, all predictions of that class from all samples are taken highest score
+  first; each is matched to the nearest still-unmatched ground-truth box of the same class in the same sample,
+  and is a true positive only if that distance is strictly below the threshold.
+* Precision and recall (tp / npos) are resampled on 101 recall points with ``np.interp(..., right=0)``; AP
+  drops the bins up to and including ``min_recall`` = 0.1, subtracts ``min_precision`` = 0.1, clips at 0 and
+  divides by 0.9. A class's mAP is the mean over the thresholds 0.5, 1, 2, 4 m; the overall mAP is the mean
+  over classes. The DSFEC paper (§4.2) reports Car "AP@4" and Car "mAP" this way, in percent.
+* TP errors (translation, scale, orientation, velocity, attribute) are cumulative means over the matches,
+  resampled on the same recall points, averaged from just above min_recall up to the maximum recall reached,
+  at ``dist_th_tp`` = 2 m.
+* Before matching, boxes farther from the ego than the class range (50 m vehicles, 40 m pedestrians and
+  two-wheelers, 30 m cones and barriers) and boxes with ``num_pts == 0`` (no lidar + radar point inside) are
+  dropped, from ground truth and predictions alike (predictions carry ``num_pts = -1`` so survive); the devkit
+  also drops bicycles/motorcycles inside bicycle racks, which needs the nuScenes database and is not done here.
+* A submission holds at most 500 boxes per sample, and must cover exactly the ground truth's samples.
+
+Boxes are plain dicts in the official submission format (``translation``, ``size`` (w, l, h), ``rotation``
+quaternion (w, x, y, z), ``velocity`` (vx, vy), ``detection_name``, ``detection_score``, ``attribute_name``;
+ground truth may add ``num_pts`` and have no score), grouped as ``{sample_token: [box, ...]}``. The project's
+frames are in the ego/sensor frame, so a box's ego distance is its own (x, y) norm unless it carries an
+``ego_translation`` (give one when the frame is not the ego frame).
+"""
+
+from __future__ import annotations
+
+import argparse
+import bisect
+import dataclasses
+import json
+import math
+import sys
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from ..boxes.structures import Boxes
+
+DETECTION_NAMES = ("car", "truck", "bus", "trailer", "construction_vehicle", "pedestrian", "motorcycle",
+                   "bicycle", "traffic_cone", "barrier")
+ATTRIBUTE_NAMES = ("pedestrian.moving", "pedestrian.sitting_lying_down", "pedestrian.standing",
+                   "cycle.with_rider", "cycle.without_rider", "vehicle.moving", "vehicle.parked", "vehicle.stopped")
+# detection_cvpr_2019: evaluation range per class, metres from the ego in the ground plane.
+CLASS_RANGE = {"car": 50.0, "truck": 50.0, "bus": 50.0, "trailer": 50.0, "construction_vehicle": 50.0,
+               "pedestrian": 40.0, "motorcycle": 40.0, "bicycle": 40.0, "traffic_cone": 30.0, "barrier": 30.0}
+DIST_THS = (0.5, 1.0, 2.0, 4.0)
+DIST_TH_TP = 2.0
+MIN_RECALL = 0.1
+MIN_PRECISION = 0.1
+MAX_BOXES_PER_SAMPLE = 500
+TP_METRICS = ("trans_err", "scale_err", "orient_err", "vel_err", "attr_err")
+META_KEYS = ("use_camera", "use_lidar", "use_radar", "use_map", "use_external")
+DSFEC_CLASSES = ("car", "truck", "pedestrian", "bicycle")
+NELEM = 101  # recall points 0, 0.01, ..., 1
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Curves and the two summary functions
+# ----------------------------------------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class MetricData:
+    """One class at one threshold, resampled on 101 recall points (the devkit's DetectionMetricData)."""
+
+    recall: np.ndarray
+    precision: np.ndarray
+    confidence: np.ndarray
+    trans_err: np.ndarray
+    vel_err: np.ndarray
+    scale_err: np.ndarray
+    orient_err: np.ndarray
+    attr_err: np.ndarray
+
+    @classmethod
+    def no_predictions(cls) -> "MetricData":
+        """No GT of the class, or no prediction matched: precision 0 everywhere (AP 0), errors 1."""
+        ones = np.ones(NELEM)
+        return cls(np.linspace(0, 1, NELEM), np.zeros(NELEM), np.zeros(NELEM), ones, ones, ones, ones, ones)
+
+    @property
+    def max_recall_ind(self) -> int:
+        """Last recall bin with non-zero confidence: interpolation gives 0 beyond the highest recall reached."""
+        nonzero = np.nonzero(self.confidence)[0]
+        return int(nonzero[-1]) if len(nonzero) else 0
+
+    @property
+    def max_recall(self) -> float:
+        return float(self.recall[self.max_recall_ind])
+
+
+def calc_ap(md: MetricData, min_recall: float = MIN_RECALL, min_precision: float = MIN_PRECISION) -> float:
+    """AP as the devkit defines it: the low-recall bins (up to and including min_recall) are noisy, so they are
+    dropped; precision below min_precision counts as 0, and the result is rescaled so a perfect curve gives 1."""
+    if not (0 <= min_precision < 1 and 0 <= min_recall <= 1):
+        raise ValueError(f"need 0 <= min_precision < 1 and 0 <= min_recall <= 1; got {min_precision}, {min_recall}")
+    prec = np.copy(md.precision)[round(100 * min_recall) + 1:] - min_precision
+    prec[prec < 0] = 0
+    return float(np.mean(prec)) / (1.0 - min_precision)
+
+
+def calc_tp(md: MetricData, min_recall: float = MIN_RECALL, metric_name: str = "trans_err") -> float:
+    """Mean of a TP error over the recall bins above min_recall up to the highest recall reached (inclusive);
+    1.0 (the worst normalised error) when the class never gets past min_recall."""
+    first, last = round(100 * min_recall) + 1, md.max_recall_ind
+    if last < first:
+        return 1.0
+    return float(np.mean(getattr(md, metric_name)[first:last + 1]))
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Per-match errors (devkit common/utils.py semantics)
+# ----------------------------------------------------------------------------------------------------------
+
+def yaw_to_quaternion(yaw: float) -> list[float]:
+    """Rotation by ``yaw`` about +z as a (w, x, y, z) quaternion, the submission's ``rotation``."""
+    return [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
+
+
+def quaternion_to_yaw(q: Sequence[float]) -> float:
+    """Heading of the rotated +x axis in the ground plane (the devkit's quaternion_yaw); q need not be unit."""
+    w, x, y, z = (float(v) for v in q)
+    return float(np.arctan2(2.0 * (w * z + x * y), w * w + x * x - y * y - z * z))
+
+
+def angle_diff(x: float, y: float, period: float) -> float:
+    """Signed smallest difference x - y modulo ``period`` (pi for barriers, whose front is undefined)."""
+    diff = (np.float64(x) - y + period / 2) % period - period / 2
+    if diff > np.pi:
+        diff = diff - 2 * np.pi
+    return float(diff)
+
+
+def _center_distance(a: Mapping, b: Mapping) -> float:
+    dx, dy = b["translation"][0] - a["translation"][0], b["translation"][1] - a["translation"][1]
+    return float(np.sqrt(dx * dx + dy * dy))
+
+
+def _scale_iou(gt: Mapping, pred: Mapping) -> float:
+    """3D IoU of the two boxes after aligning centres and headings, so only the sizes count."""
+    sg, sp = np.asarray(gt["size"], float), np.asarray(pred["size"], float)
+    inter = np.prod(np.minimum(sg, sp))
+    return float(inter / (np.prod(sg) + np.prod(sp) - inter))
+
+
+def _match_errors(gt: Mapping, pred: Mapping, class_name: str) -> dict[str, float]:
+    period = np.pi if class_name == "barrier" else 2 * np.pi
+    yaw_gt, yaw_pred = quaternion_to_yaw(gt["rotation"]), quaternion_to_yaw(pred["rotation"])
+    attr_acc = np.nan if gt["attribute_name"] == "" else float(gt["attribute_name"] == pred["attribute_name"])
+    return {"trans_err": _center_distance(gt, pred),
+            "vel_err": float(np.linalg.norm(np.asarray(pred["velocity"], float) - np.asarray(gt["velocity"], float))),
+            "scale_err": 1.0 - _scale_iou(gt, pred),
+            "orient_err": abs(angle_diff(yaw_gt, yaw_pred, period)),
+            "attr_err": 1.0 - attr_acc}
+
+
+def _cummean(x: np.ndarray) -> np.ndarray:
+    """Running mean ignoring NaNs (missing attributes / velocities); all-NaN gives 1, the worst error."""
+    if np.all(np.isnan(x)):
+        return np.ones(len(x))
+    sums, counts = np.nancumsum(x.astype(float)), np.cumsum(~np.isnan(x))
+    return np.divide(sums, counts, out=np.zeros_like(sums), where=counts != 0)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Matching
+# ----------------------------------------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class _ClassCandidates:
+    """One class's predictions in the devkit's order, each with the GT boxes it could match, nearest first.
+
+    Distances and per-pair errors do not depend on the threshold, so they are computed once for all of them."""
+
+    npos: int
+    preds: list           # [(sample_token, box)] highest score first
+    candidates: list      # per prediction: ([gt index], [distance]) ascending distance, ties by GT index
+    gts: dict             # sample_token -> [GT boxes of this class]
+    errors: dict = dataclasses.field(default_factory=dict)  # (pred rank, GT index) -> TP errors
+
+
+def _sample_candidates(boxes: list, gts: list, max_dist: float) -> list:
+    """For each prediction of one sample: GT indices nearer than max_dist, nearest first, with distances."""
+    p_Px2 = np.array([b["translation"][:2] for b in boxes], float).reshape(-1, 2)
+    g_Gx2 = np.array([b["translation"][:2] for b in gts], float).reshape(-1, 2)
+    diff = p_Px2[:, None, :] - g_Gx2[None, :, :]
+    d_PxG = np.sqrt(diff[..., 0] * diff[..., 0] + diff[..., 1] * diff[..., 1])
+    idx = np.argsort(d_PxG, axis=1, kind="stable")  # stable: the lowest GT index wins a tie, as the devkit's '<'
+    dist = np.take_along_axis(d_PxG, idx, axis=1)
+    out = []
+    for row_i, row_d in zip(idx.tolist(), dist.tolist()):
+        n = bisect.bisect_left(row_d, max_dist)  # how many are strictly nearer than max_dist
+        out.append((row_i[:n], row_d[:n]))
+    return out
+
+
+def _class_candidates(gt: Mapping, pred: Mapping, class_name: str, max_dist: float) -> _ClassCandidates:
+    gts = {tok: [b for b in boxes if b["detection_name"] == class_name] for tok, boxes in gt.items()}
+    preds, candidates = [], []
+    for tok, boxes in pred.items():  # the devkit's order: samples as listed, boxes as listed
+        mine = [b for b in boxes if b["detection_name"] == class_name]
+        preds += [(tok, b) for b in mine]
+        candidates += _sample_candidates(mine, gts.get(tok, []), max_dist) if mine else []
+    # The devkit sorts (score, index) pairs and reverses: highest score first, ties to the later prediction.
+    order = sorted(range(len(preds)), key=lambda i: (preds[i][1]["detection_score"], i), reverse=True)
+    return _ClassCandidates(sum(len(b) for b in gts.values()), [preds[i] for i in order],
+                            [candidates[i] for i in order], gts)
+
+
+def _match(cc: _ClassCandidates, class_name: str, dist_th: float) -> MetricData:
+    """Greedy matching, highest score first: nearest still-unmatched GT, a hit only if strictly below dist_th."""
+    if cc.npos == 0:
+        return MetricData.no_predictions()
+    taken = {tok: np.zeros(len(b), bool) for tok, b in cc.gts.items()}
+    is_tp, matches = np.zeros(len(cc.preds)), []
+    for k, ((tok, box), (idx, dist)) in enumerate(zip(cc.preds, cc.candidates)):
+        for j, d in zip(idx, dist):
+            if d >= dist_th:
+                break  # the nearest untaken GT is too far: a false positive
+            if not taken[tok][j]:
+                taken[tok][j], is_tp[k] = True, 1.0
+                if (k, j) not in cc.errors:
+                    cc.errors[k, j] = _match_errors(cc.gts[tok][j], box, class_name)
+                matches.append((box["detection_score"], cc.errors[k, j]))
+                break
+    if not matches:
+        return MetricData.no_predictions()
+    return _curves(is_tp, np.array([b["detection_score"] for _, b in cc.preds], float), matches, cc.npos)
+
+
+def _curves(is_tp: np.ndarray, conf: np.ndarray, matches: list, npos: int) -> MetricData:
+    """Cumulative precision/recall resampled on 101 recall points; per-match errors resampled by confidence."""
+    tp, fp = np.cumsum(is_tp), np.cumsum(1.0 - is_tp)
+    rec_interp = np.linspace(0, 1, NELEM)
+    precision = np.interp(rec_interp, tp / float(npos), tp / (fp + tp), right=0)
+    confidence = np.interp(rec_interp, tp / float(npos), conf, right=0)
+    match_conf = np.array([score for score, _ in matches], float)
+    resampled = {}
+    for key in TP_METRICS:
+        mean = _cummean(np.array([errors[key] for _, errors in matches], float))
+        # np.interp needs increasing x, hence the reversals (confidences fall as recall rises).
+        resampled[key] = np.interp(confidence[::-1], match_conf[::-1], mean[::-1])[::-1]
+    return MetricData(rec_interp, precision, confidence, **resampled)
+
+
+def accumulate(gt: Mapping[str, list], pred: Mapping[str, list], class_name: str, dist_th: float) -> MetricData:
+    """The devkit's ``accumulate`` for one class and one centre-distance threshold (metres).
+
+    ``gt`` and ``pred`` map sample tokens to lists of box dicts (already filtered; see ``filter_boxes``)."""
+    return _match(_class_candidates(gt, pred, class_name, dist_th), class_name, dist_th)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Filters and the whole evaluation
+# ----------------------------------------------------------------------------------------------------------
+
+def ego_distance(box: Mapping) -> float:
+    """Ground-plane distance from the ego: ``ego_translation`` when given, else the box's own translation."""
+    x, y = (box.get("ego_translation") or box["translation"])[:2]
+    return math.sqrt(x * x + y * y)
+
+
+def filter_boxes(boxes: Mapping[str, list], class_range: Mapping[str, float] | None = CLASS_RANGE,
+                 drop_empty: bool = True) -> dict[str, list]:
+    """The devkit's ``filter_eval_boxes`` without the bike-rack step (which needs the nuScenes database).
+
+    Keeps boxes strictly nearer than their class range (classes not in ``class_range`` are kept; ``None``
+    turns the range filter off) and, with ``drop_empty``, drops boxes whose ``num_pts`` is 0: a GT box no
+    lidar or radar point hit cannot be detected. Predictions carry ``num_pts = -1`` and so are never dropped
+    by it. For radar-only sources, ``num_pts`` may be the radar point count."""
+    out = {}
+    for tok, lst in boxes.items():
+        keep = [b for b in lst if class_range is None or b["detection_name"] not in class_range
+                or ego_distance(b) < class_range[b["detection_name"]]]
+        out[tok] = [b for b in keep if not (drop_empty and b.get("num_pts", -1) == 0)]
+    return out
+
+
+def _check_samples(gt: Mapping, pred: Mapping, max_boxes_per_sample: int | None, same_samples: bool) -> None:
+    if max_boxes_per_sample is not None:
+        for tok, boxes in pred.items():
+            if len(boxes) > max_boxes_per_sample:
+                raise ValueError(f"sample {tok!r} has {len(boxes)} predicted boxes; at most "
+                                 f"{max_boxes_per_sample} are allowed")
+    if same_samples and set(gt) != set(pred):
+        missing, extra = sorted(set(gt) - set(pred)), sorted(set(pred) - set(gt))
+        raise ValueError(f"predictions must cover exactly the GT samples (as the devkit requires): "
+                         f"{len(missing)} missing (e.g. {missing[:3]}), {len(extra)} extra (e.g. {extra[:3]})")
+
+
+def _tp_errors(md: MetricData, class_name: str, min_recall: float) -> dict[str, float]:
+    """TP errors at dist_th_tp; the devkit reports NaN where a class has no such property."""
+    out = {}
+    for name in TP_METRICS:
+        undefined = (class_name == "traffic_cone" and name in ("attr_err", "vel_err", "orient_err")) or \
+                    (class_name == "barrier" and name in ("attr_err", "vel_err"))
+        out[name] = float("nan") if undefined else calc_tp(md, min_recall, name)
+    return out
+
+
+def evaluate(gt: Mapping, pred: Mapping, classes: Sequence[str] = DSFEC_CLASSES,
+             dist_ths: Sequence[float] = DIST_THS, *, dist_th_tp: float = DIST_TH_TP,
+             min_recall: float = MIN_RECALL, min_precision: float = MIN_PRECISION,
+             class_range: Mapping[str, float] | None = CLASS_RANGE, drop_empty_gt: bool = True,
+             max_boxes_per_sample: int | None = MAX_BOXES_PER_SAMPLE, same_samples: bool = True) -> dict:
+    """Per-class AP at each threshold, per-class mAP over thresholds (the DSFEC "mAP"), AP@4 and overall mAP.
+
+    ``gt`` / ``pred`` map sample tokens to lists of submission-format box dicts, or to ``Boxes`` (GT) /
+    ``(Boxes, scores)`` (predictions). Defaults follow the devkit: class ranges, the num_pts == 0 filter, at
+    most 500 predictions per sample and identical sample sets. Values are fractions (the paper prints %).
+
+    Returns ``{"AP": {cls: {"0.5": ap, ...}}, "class_mAP": {cls: mean over thresholds}, "AP@4": {cls: ap},
+    "mAP": mean of class_mAP, "max_recall": {cls: {th: r}}, "tp_errors": {cls: {err: value at dist_th_tp}},
+    "num_gt"/"num_pred": {cls: count after filtering}, "classes", "dist_ths"}``; thresholds keyed as str(float)."""
+    gt = filter_boxes(_as_results(gt, True), class_range, drop_empty_gt)
+    pred = _as_results(pred, False)
+    _check_samples(gt, pred, max_boxes_per_sample, same_samples)
+    pred = filter_boxes(pred, class_range, drop_empty_gt)
+    keys = [str(float(th)) for th in dist_ths]
+    out = {"classes": list(classes), "dist_ths": [float(t) for t in dist_ths], "AP": {}, "max_recall": {},
+           "class_mAP": {}, "tp_errors": {}, "num_gt": {}, "num_pred": {}}
+    for name in classes:
+        cc = _class_candidates(gt, pred, name, max(*dist_ths, dist_th_tp))
+        mds = {key: _match(cc, name, float(th)) for key, th in zip(keys, dist_ths)}
+        out["AP"][name] = {key: calc_ap(md, min_recall, min_precision) for key, md in mds.items()}
+        out["max_recall"][name] = {key: md.max_recall for key, md in mds.items()}
+        out["class_mAP"][name] = float(np.mean(list(out["AP"][name].values())))
+        out["tp_errors"][name] = _tp_errors(_match(cc, name, dist_th_tp), name, min_recall)
+        out["num_gt"][name], out["num_pred"][name] = cc.npos, len(cc.preds)
+    if "4.0" in keys:
+        out["AP@4"] = {name: out["AP"][name]["4.0"] for name in classes}
+    out["mAP"] = float(np.mean(list(out["class_mAP"].values()))) if classes else float("nan")
+    return out
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Submission format: validation, JSON I/O, Boxes conversion
+# ----------------------------------------------------------------------------------------------------------
+
+_PLAIN_NUMBERS = {int, float}
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+
+
+def _vector(entry: Mapping, field: str, n: int, fail, finite: bool = True) -> list[float]:
+    v = entry.get(field)
+    v = v.tolist() if isinstance(v, np.ndarray) else v
+    if not isinstance(v, (list, tuple)) or len(v) != n:
+        fail(field, f"must be a list of {n} numbers; got {v!r}")
+    if not finite:  # velocity: NaN (JSON null) means unknown, as in the devkit's ground truth
+        v = [math.nan if x is None else x for x in v]
+    # Fast path for plain JSON numbers; bools (an int subclass) and strings fall to the exact check and fail.
+    if not set(map(type, v)) <= _PLAIN_NUMBERS and not all(_is_number(x) for x in v):
+        fail(field, f"must be a list of {n} numbers; got {v!r}")
+    out = [float(x) for x in v]
+    if finite and not all(map(math.isfinite, out)):
+        fail(field, f"must be a list of {n} finite numbers; got {v!r}")
+    return out
+
+
+def _check_entry(entry: Any, token: str, i: int, source: str, is_gt: bool, names) -> dict:
+    """One box: returns a normalised copy, or raises ValueError naming the file, sample token and field."""
+    def fail(field, problem):
+        raise ValueError(f"{source}: sample {token!r}, box {i}: field {field!r} {problem}")
+
+    if not isinstance(entry, Mapping):
+        fail("<box>", f"must be a JSON object; got {type(entry).__name__}")
+    if entry.get("sample_token") != token:
+        fail("sample_token", f"must equal the sample it is listed under; got {entry.get('sample_token')!r}")
+    out = {"sample_token": token, "translation": _vector(entry, "translation", 3, fail),
+           "size": _vector(entry, "size", 3, fail), "rotation": _vector(entry, "rotation", 4, fail),
+           "velocity": _vector(entry, "velocity", 2, fail, finite=False)}
+    if min(out["size"]) <= 0:
+        fail("size", f"must be positive (w, l, h); got {out['size']}")
+    if not any(out["rotation"]):
+        fail("rotation", "must be a non-zero (w, x, y, z) quaternion")
+    name = entry.get("detection_name")
+    if not isinstance(name, str) or not name or (names is not None and name not in names):
+        fail("detection_name", f"must be one of {list(names) if names else 'non-empty strings'}; got {name!r}")
+    out["detection_name"] = name
+    score = entry.get("detection_score", -1.0 if is_gt else None)
+    if not _is_number(score) or not math.isfinite(score):
+        fail("detection_score", f"must be a finite number; got {score!r}")
+    out["detection_score"] = float(score)
+    attr = entry.get("attribute_name", "")
+    if attr != "" and attr not in ATTRIBUTE_NAMES:
+        fail("attribute_name", f"must be '' or one of {list(ATTRIBUTE_NAMES)}; got {attr!r}")
+    out["attribute_name"] = attr
+    num_pts = entry.get("num_pts", -1)
+    if not isinstance(num_pts, (int, np.integer)) or isinstance(num_pts, bool):
+        fail("num_pts", f"must be an integer; got {num_pts!r}")
+    out["num_pts"] = int(num_pts)
+    if "ego_translation" in entry:
+        out["ego_translation"] = _vector(entry, "ego_translation", 3, fail)
+    return out
+
+
+def validate_results(results: Any, source: str = "<results>", is_gt: bool = False,
+                     detection_names: Sequence[str] | None = DETECTION_NAMES) -> dict[str, list]:
+    """Checks ``{sample_token: [box, ...]}`` and returns normalised copies (floats, defaults filled in:
+    GT score -1 and num_pts -1 as the devkit's loaders set them). ``detection_names=None`` accepts any class."""
+    if not isinstance(results, Mapping):
+        raise ValueError(f"{source}: field 'results' must map sample tokens to lists of boxes")
+    out = {}
+    for token, boxes in results.items():
+        if not isinstance(boxes, list):
+            raise ValueError(f"{source}: sample {token!r}: field 'results' entry must be a list of boxes")
+        out[token] = [_check_entry(b, token, i, source, is_gt, detection_names) for i, b in enumerate(boxes)]
+    return out
+
+
+def _check_meta(meta: Any, source: str) -> dict:
+    if not isinstance(meta, Mapping):
+        raise ValueError(f"{source}: field 'meta' must be an object with {list(META_KEYS)}")
+    for key in META_KEYS:
+        if key in meta and not isinstance(meta[key], bool):
+            raise ValueError(f"{source}: field 'meta.{key}' must be true or false; got {meta[key]!r}")
+    return dict(meta)
+
+
+def read_submission(path, is_gt: bool = False, max_boxes_per_sample: int | None = MAX_BOXES_PER_SAMPLE,
+                    detection_names: Sequence[str] | None = DETECTION_NAMES) -> tuple[dict[str, list], dict]:
+    """Reads a submission (or GT in the same format) -> (results, meta); ValueError says what is wrong where.
+
+    Predictions need ``meta`` and at most ``max_boxes_per_sample`` boxes per sample (the devkit asserts both);
+    ground truth may omit ``meta``, ``detection_score`` and ``num_pts``."""
+    source = str(path)
+    try:
+        with open(path) as f:
+            data = json.load(f)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{source}: not valid JSON ({e})") from None
+    if not isinstance(data, Mapping) or "results" not in data:
+        raise ValueError(f"{source}: field 'results' is missing")
+    if "meta" not in data and not is_gt:
+        raise ValueError(f"{source}: field 'meta' is missing")
+    meta = _check_meta(data.get("meta", {}), source)
+    results = validate_results(data["results"], source, is_gt, detection_names)
+    if not is_gt and max_boxes_per_sample is not None:
+        for token, boxes in results.items():
+            if len(boxes) > max_boxes_per_sample:
+                raise ValueError(f"{source}: sample {token!r}: field 'results' has {len(boxes)} boxes; "
+                                 f"at most {max_boxes_per_sample} are allowed")
+    return results, meta
+
+
+def _json_box(box: Mapping) -> dict:
+    out = {k: box[k] for k in ("sample_token", "translation", "size", "rotation")}
+    out["velocity"] = [None if math.isnan(v) else v for v in box["velocity"]]
+    out.update({k: box[k] for k in ("detection_name", "detection_score", "attribute_name")})
+    if box.get("num_pts", -1) != -1:
+        out["num_pts"] = box["num_pts"]
+    if "ego_translation" in box:
+        out["ego_translation"] = box["ego_translation"]
+    return out
+
+
+def write_submission(path, results: Mapping, meta: Mapping | None = None, is_gt: bool = False) -> None:
+    """Writes ``{"meta": ..., "results": ...}``; meta defaults to a radar-only entry (use_radar true)."""
+    meta = _check_meta(dict(meta) if meta is not None else
+                       {**{k: False for k in META_KEYS}, "use_radar": True}, str(path))
+    results = _as_results(results, is_gt)
+    with open(path, "w") as f:
+        json.dump({"meta": meta, "results": {t: [_json_box(b) for b in boxes] for t, boxes in results.items()}}, f)
+
+
+def boxes_to_entries(sample_token: str, boxes, scores=None, attribute_names=None, num_pts=None) -> list[dict]:
+    """The project's ``Boxes`` (+ scores) -> submission boxes; no scores means ground truth (score -1)."""
+    entries = []
+    for i in range(len(boxes)):
+        entries.append({
+            "sample_token": sample_token,
+            "translation": [float(v) for v in boxes.center[i]], "size": [float(v) for v in boxes.size[i]],
+            "rotation": yaw_to_quaternion(float(boxes.yaw[i])), "velocity": [float(v) for v in boxes.velocity[i]],
+            "detection_name": str(boxes.names[i]),
+            "detection_score": -1.0 if scores is None else float(scores[i]),
+            "attribute_name": "" if attribute_names is None else str(attribute_names[i]),
+            "num_pts": -1 if num_pts is None else int(num_pts[i])})
+    return entries
+
+
+def entries_to_boxes(entries: Sequence[Mapping]):
+    """Submission boxes -> (``Boxes``, scores (M,) float32); yaw from the quaternion, unknown velocity -> 0."""
+    if not entries:
+        return Boxes.empty(), np.zeros((0,), np.float32)
+    f32 = lambda key: np.array([e[key] for e in entries], np.float32)  # noqa: E731
+    boxes = Boxes(f32("translation"), f32("size"),
+                  np.array([quaternion_to_yaw(e["rotation"]) for e in entries], np.float32),
+                  np.nan_to_num(f32("velocity")), np.array([e["detection_name"] for e in entries]))
+    return boxes, np.array([e.get("detection_score", -1.0) for e in entries], np.float32)
+
+
+def _as_results(data: Mapping, is_gt: bool) -> dict[str, list]:
+    """Accepts lists of box dicts, ``Boxes`` or ``(Boxes, scores)`` per sample; returns validated box dicts."""
+    out = {}
+    for token, value in data.items():
+        if isinstance(value, tuple) and len(value) == 2 and hasattr(value[0], "center"):
+            value = boxes_to_entries(token, value[0], value[1])
+        elif hasattr(value, "center"):
+            value = boxes_to_entries(token, value)
+        out[token] = value
+    return validate_results(out, "<in memory>", is_gt, detection_names=None)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# CLI
+# ----------------------------------------------------------------------------------------------------------
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_jsonable(v) for v in x]
+    return None if isinstance(x, float) and math.isnan(x) else x
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m dsfec_jax.metrics.nuscenes --gt GT.json --pred PRED.json``: prints the metrics as JSON."""
+    p = argparse.ArgumentParser(prog="python -m dsfec_jax.metrics.nuscenes", description=__doc__.split("\n")[0])
+    p.add_argument("--gt", required=True, help="ground truth in the submission format")
+    p.add_argument("--pred", required=True, help="submission JSON")
+    p.add_argument("--classes", default=",".join(DSFEC_CLASSES), help="comma-separated class names")
+    p.add_argument("--dist-ths", default="0.5,1,2,4", help="comma-separated centre-distance thresholds (m)")
+    p.add_argument("--no-range-filter", action="store_true", help="keep boxes beyond the class ranges")
+    p.add_argument("--keep-empty-gt", action="store_true", help="keep GT boxes with num_pts == 0")
+    p.add_argument("--subset", action="store_true", help="allow predictions for a subset of the GT samples")
+    args = p.parse_args(argv)
+    gt, _ = read_submission(args.gt, is_gt=True)
+    pred, _ = read_submission(args.pred)
+    if args.subset:
+        gt = {t: gt.get(t, []) for t in pred}
+    result = evaluate(gt, pred, classes=[c for c in args.classes.split(",") if c],
+                      dist_ths=[float(t) for t in args.dist_ths.split(",")],
+                      class_range=None if args.no_range_filter else CLASS_RANGE, drop_empty_gt=not args.keep_empty_gt)
+    json.dump(_jsonable(result), sys.stdout, indent=2)
+    sys.stdout.write("\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

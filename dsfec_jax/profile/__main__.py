@@ -1,0 +1,78 @@
+"""python -m dsfec_jax.profile --models baseline,dsfec_l,dsfec_m,dsfec_s [--json] [--paper]
+
+Prints one record per model (params, GFLOPs per stage with XLA's count beside it, memory,
+jitted batch-1 latency per stage). --threads must be handled before jax is imported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shlex
+import sys
+
+
+def parse(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m dsfec_jax.profile", description=__doc__.splitlines()[0])
+    p.add_argument("--models", default="baseline,dsfec_l,dsfec_m,dsfec_s", help="comma-separated zoo names")
+    p.add_argument("--json", action="store_true", help="print a JSON list of records")
+    p.add_argument("--paper", action="store_true", help="also print the paper's Tables 1-3 beside ours")
+    p.add_argument("--no-latency", action="store_true", help="sizes only (no timing loop)")
+    p.add_argument("--repeats", type=int, default=20)
+    p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--threads", type=int, default=None, help="XLA CPU intra-op threads (1 = single thread)")
+    p.add_argument("--out", default=None, help="also write {command, records} JSON here (atomically)")
+    p.add_argument("--readme", default=None, help="regenerate the zoo table in this README from the records")
+    return p.parse_args(argv)
+
+
+def set_threads(threads: int | None) -> None:
+    if threads is None:
+        return
+    flag = "--xla_cpu_multi_thread_eigen=false" if threads == 1 else f"intra_op_parallelism_threads={threads}"
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " " + flag).strip()
+
+
+def human(records: list[dict]) -> str:
+    lines = []
+    for r in records:
+        lat = r.get("latency_ms")
+        lines.append(
+            f"{r['model']:<10} params {r['params']:>10,d}  GFLOPs {r['gflops']:7.3f} (XLA {r['xla_gflops']:7.3f}, "
+            f"{100 * r['xla_vs_analytic']:+.1f} %)  memory {r['memory_mb']:.2f} MB (XLA peak {r['xla_peak_mb']:.1f} MB)  "
+            + (f"latency {lat:.2f} ms (p90 {r['latency_p90_ms']:.2f})" if lat else "latency -")
+        )
+        lines.append("           GFLOPs/stage " + ", ".join(f"{k} {v:.3f}" for k, v in r["gflops_per_stage"].items()))
+        if lat:
+            lines.append("           ms/stage " + ", ".join(f"{k} {v:.2f}" for k, v in r["latency_per_stage_ms"].items()))
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    args = parse(argv)
+    set_threads(args.threads)
+    from .. import atomic, zoo
+    from . import compare, records, zoo_table
+
+    names = [n.strip() for n in args.models.split(",") if n.strip()]
+    unknown = [n for n in names if n not in zoo.available()]
+    if unknown:
+        sys.exit(f"unknown model(s) {unknown}; available: {zoo.available()}")
+    recs = records.profile(records.detectors_for(names), not args.no_latency, args.repeats, args.warmup)
+    print(json.dumps(recs, indent=2) if args.json else human(recs))
+    if args.paper:
+        rows = compare.table1_rows(recs) + compare.table2_rows() + compare.table3_rows()
+        print(json.dumps(rows, indent=2) if args.json else "\n" + compare.markdown(rows))
+    if args.out or args.readme:
+        command = "python -m dsfec_jax.profile " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
+        payload = {"command": command, "records": recs}
+        if args.out:
+            atomic.write_json(args.out, payload)
+        if args.readme:
+            zoo_table.update_readme(args.readme, payload)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,50 @@
+"""Jitted batch-1 latency, whole network and per stage.
+
+On a shared 2-core box another process can move a timing by 4x, so models are timed in one
+interleaved loop (A B A B ...) and medians and ratios are what to quote.
+"""
+
+from __future__ import annotations
+
+import time
+
+import jax
+import numpy as np
+
+STAGES = ("pillar_net", "backbone", "neck_heads")
+
+
+def stage_functions(detector, variables, inputs) -> dict:
+    """name -> zero-argument callable that runs that stage (jitted, compiled, blocking)."""
+    enc = jax.jit(lambda v, x: detector.apply_method(v, "encode", x["points"], x["mask"], x["coords"]))
+    bb = jax.jit(lambda v, img: detector.apply_method(v, "backbone", img))
+    det = jax.jit(lambda v, st: detector.apply_method(v, "detect", st))
+    full = jax.jit(detector.apply)
+    image = enc(variables, inputs)
+    stages = bb(variables, image)
+    calls = {
+        "total": lambda: full(variables, inputs),
+        "pillar_net": lambda: enc(variables, inputs),
+        "backbone": lambda: bb(variables, image),
+        "neck_heads": lambda: det(variables, stages),
+    }
+    return {k: (lambda f=f: jax.block_until_ready(f())) for k, f in calls.items()}
+
+
+def time_interleaved(suites: dict[str, dict], repeats: int = 20, warmup: int = 3) -> dict:
+    """suites: model -> {stage: callable}. Returns model -> stage -> {median_ms, p90_ms}."""
+    for fns in suites.values():
+        for fn in fns.values():
+            for _ in range(warmup):
+                fn()
+    samples = {m: {s: [] for s in fns} for m, fns in suites.items()}
+    for _ in range(repeats):
+        for model, fns in suites.items():
+            for stage, fn in fns.items():
+                t0 = time.perf_counter()
+                fn()
+                samples[model][stage].append(1e3 * (time.perf_counter() - t0))
+    return {
+        m: {s: {"median_ms": float(np.median(v)), "p90_ms": float(np.percentile(v, 90))} for s, v in st.items()}
+        for m, st in samples.items()
+    }

@@ -1,0 +1,65 @@
+"""One record per model: params, GFLOPs, memory and latency, with conventions and machine."""
+
+from __future__ import annotations
+
+import jax
+
+from .. import zoo
+from . import counting, latency, memory
+from .environment import environment
+
+
+def size_record(detector) -> dict:
+    """Everything but latency: params, analytic and XLA GFLOPs, memory (no timing loop)."""
+    variables = detector.init(jax.random.key(0))
+    inputs = detector.dummy_inputs(1)
+    params = counting.count_params(variables)
+    flops = counting.count_gflops(detector)
+    compiled = counting.compile_network(detector, variables, inputs)
+    xla = counting.xla_gflops(compiled)
+    cfg = detector.config
+    return {
+        "model": cfg.name,
+        "family": cfg.family,
+        "input": {k: list(v.shape) for k, v in inputs.items()},
+        "params": params["total"],
+        "params_per_stage": params["per_stage"],
+        "params_convention": counting.PARAMS_CONVENTION,
+        "gflops": round(flops["total"], 4),
+        "gflops_per_stage": {k: round(v, 4) for k, v in flops["per_stage"].items()},
+        "gflops_convention": counting.FLOPS_CONVENTION,
+        "xla_gflops": round(xla, 4),
+        "xla_vs_analytic": round(xla / flops["total"] - 1, 4),
+        "memory_mb": round(memory.paper_memory_mb(detector, variables), 4),
+        "memory_convention": "stem input + output maps (float32, batch 1) + stem weights, MiB (DSFEC Table 2)",
+        "xla_peak_mb": round(memory.xla_peak_mb(compiled), 2),
+        "notes": cfg.notes,
+    }
+
+
+def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int = 3) -> list[dict]:
+    """Records for `detectors`; latencies come from one interleaved loop over all of them."""
+    records = [size_record(d) for d in detectors]
+    env = environment()
+    if timing:
+        suites = {}
+        for d in detectors:
+            variables = d.init(jax.random.key(0))
+            suites[d.name] = latency.stage_functions(d, variables, d.dummy_inputs(1))
+        times = latency.time_interleaved(suites, repeats, warmup)
+        for rec in records:
+            t = times[rec["model"]]
+            rec["latency_ms"] = round(t["total"]["median_ms"], 3)
+            rec["latency_p90_ms"] = round(t["total"]["p90_ms"], 3)
+            rec["latency_per_stage_ms"] = {s: round(t[s]["median_ms"], 3) for s in latency.STAGES}
+            rec["latency_setup"] = {"batch": 1, "repeats": repeats, "warmup": warmup, "interleaved": True,
+                                    "depthwise_impl": "shifted", **env}
+    else:
+        for rec in records:
+            rec["latency_ms"] = None
+    return records
+
+
+def detectors_for(names: list[str]) -> list:
+    return [zoo.create(n) for n in names]
+

@@ -1,0 +1,44 @@
+"""The train step: one jitted pure function (state, batch) -> (state, metrics), state donated.
+
+state = {'params', 'batch_stats', 'opt_state', 'step'}; batch = {'inputs': pillar tensors,
+'targets': per-head target maps}.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import optax
+
+from .losses import LossConfig, detection_loss
+
+
+def init_state(detector, tx: optax.GradientTransformation, rng: jax.Array) -> dict:
+    variables = detector.init(rng)
+    return {"params": variables["params"], "batch_stats": variables.get("batch_stats", {}),
+            "opt_state": tx.init(variables["params"]), "step": jnp.zeros((), jnp.int32)}
+
+
+def make_train_step(detector, tx: optax.GradientTransformation, loss_cfg: LossConfig = LossConfig()):
+    def loss_fn(params, batch_stats, batch):
+        variables = {"params": params, "batch_stats": batch_stats}
+        outputs, updates = detector.apply(variables, batch["inputs"], train=True)
+        loss, parts = detection_loss(outputs, batch["targets"], loss_cfg)
+        return loss, (parts, updates["batch_stats"])
+
+    def train_step(state: dict, batch: dict):
+        grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
+        (loss, (parts, batch_stats)), grads = grad_fn(state["params"], state["batch_stats"], batch)
+        updates, opt_state = tx.update(grads, state["opt_state"], state["params"])
+        new_state = {"params": optax.apply_updates(state["params"], updates), "batch_stats": batch_stats,
+                     "opt_state": opt_state, "step": state["step"] + 1}
+        metrics = {"loss": loss, "grad_norm": optax.tree.norm(grads), **parts}
+        return new_state, metrics
+
+    return jax.jit(train_step, donate_argnums=0)
+
+
+def make_eval_fn(detector):
+    """Jitted inference on a batch of pillar inputs with a state's variables."""
+    return jax.jit(lambda state, inputs: detector.apply(
+        {"params": state["params"], "batch_stats": state["batch_stats"]}, inputs))

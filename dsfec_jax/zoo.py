@@ -1,0 +1,77 @@
+"""The model zoo: one registry of named variants and the stable public API.
+
+    >>> from dsfec_jax import zoo
+    >>> zoo.available()
+    ['baseline', 'dsfec_l', 'dsfec_m', 'dsfec_s']
+    >>> det = zoo.create("dsfec_s", stem_filters=16)
+    >>> variables = det.init(jax.random.key(0))
+    >>> heads = det.apply(variables, det.dummy_inputs(1))
+
+It sits above `models/` (not inside it) because later it also assembles predictors from
+weights, pillarization and box decoding, which models must not import.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import jax
+
+from .models.variants import VARIANTS
+
+REGISTRY: dict[str, Any] = dict(VARIANTS)
+
+
+def available() -> list[str]:
+    """Names of the registered variants."""
+    return sorted(REGISTRY)
+
+
+def config(name: str, /, **overrides):
+    """The frozen config of `name` with `overrides` applied (validated)."""
+    if name not in REGISTRY:
+        raise KeyError(f"unknown model {name!r}; available: {available()}")
+    base = REGISTRY[name]
+    fields = {f.name for f in dataclasses.fields(base)}
+    unknown = sorted(set(overrides) - fields)
+    if unknown:
+        raise TypeError(f"unknown field(s) {unknown} for {name!r}; valid fields: {sorted(fields)}")
+    overrides = {k: tuple(v) if isinstance(v, list) else v for k, v in overrides.items()}
+    return dataclasses.replace(base, **overrides)
+
+
+class Detector:
+    """A config plus its network, with pure functions of (variables, inputs)."""
+
+    def __init__(self, cfg):
+        self.config = cfg
+        self.module = cfg.build()
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    def dummy_inputs(self, batch_size: int = 1, seed: int = 0, occupancy: float = 0.5) -> dict:
+        """A valid input pytree for this detector."""
+        return self.config.dummy_inputs(batch_size, seed, occupancy)
+
+    def init(self, rng: jax.Array) -> dict:
+        """Fresh variables: {'params': ..., 'batch_stats': ...}."""
+        return jax.jit(lambda r, x: self.module.init(r, **x, train=False))(rng, self.dummy_inputs(1))
+
+    def apply(self, variables: dict, inputs: dict, train: bool = False):
+        """Head outputs. With train=True, batch statistics are used and updated, and the
+        result is (outputs, {'batch_stats': new_stats})."""
+        if train:
+            return self.module.apply(variables, **inputs, train=True, mutable=["batch_stats"])
+        return self.module.apply(variables, **inputs, train=False)
+
+    def apply_method(self, variables: dict, method: str, *args, train: bool = False):
+        """Run one stage (`encode`, `backbone`, `detect`) in eval mode: for profiling and probes."""
+        return self.module.apply(variables, *args, train=train, method=method)
+
+
+def create(name: str, /, **overrides) -> Detector:
+    """A detector of the registered variant `name`, any config field overridden."""
+    return Detector(config(name, **overrides))

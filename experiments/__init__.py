@@ -1,0 +1,1 @@
+"""One entry per paper table, reproducing it with one command."""

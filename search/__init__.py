@@ -1,0 +1,1 @@
+"""Architecture search over zoo variants: axes, trials, runners, reports."""

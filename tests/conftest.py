@@ -1,0 +1,34 @@
+import pytest
+
+from dsfec_jax import zoo
+from dsfec_jax.grid import Grid
+
+TINY_GRID = Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)  # 32 x 32
+
+
+def tiny(name: str, **overrides):
+    """A registered variant on a 32x32 grid with few pillar slots: same layers, cheap to compile."""
+    overrides = {"grid": TINY_GRID, "max_pillars": 96, "max_points": 4, **overrides}
+    return zoo.create(name, **overrides)
+
+
+@pytest.fixture
+def tiny_detector():
+    return tiny
+
+
+def shared_data_dir():
+    """Real sample data (non-commercial licences: read by path, never copied into the repo)."""
+    import os
+    from pathlib import Path
+
+    default = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+    return Path(os.environ.get("DSFEC_DATA", default))
+
+
+@pytest.fixture
+def shared_data():
+    path = shared_data_dir()
+    if not path.is_dir():
+        pytest.fail(f"real sample data not found at {path}; set DSFEC_DATA")
+    return path

@@ -1,0 +1,87 @@
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from dsfec_jax.grid import Grid
+from dsfec_jax.layers import (ACTIVATIONS, FEC, DepthwiseConv, ResidualBottleneck, activation,
+                              check_fec_filters, decorate_points, masked_max, scatter_to_bev)
+
+
+@pytest.mark.parametrize("stride", [1, 2])
+@pytest.mark.parametrize("size", [(8, 8), (9, 7), (16, 12)])
+def test_shifted_and_grouped_depthwise_agree(stride, size):
+    x = jax.random.normal(jax.random.key(1), (2, *size, 5))
+    shifted = DepthwiseConv(3, stride, "shifted")
+    variables = shifted.init(jax.random.key(0), x)
+    a = shifted.apply(variables, x)
+    b = DepthwiseConv(3, stride, "grouped").apply(variables, x)
+    assert a.shape == b.shape == (2, -(-size[0] // stride), -(-size[1] // stride), 5)
+    np.testing.assert_allclose(a, b, atol=1e-5, rtol=1e-5)
+
+
+def test_activation_names():
+    assert set(ACTIVATIONS) >= {"relu", "leaky_relu", "swish", "mish", "hard_swish", "gelu"}
+    x = jnp.array([-2.0, 0.0, 3.0])
+    np.testing.assert_allclose(activation("leaky_relu")(x), [-0.2, 0.0, 3.0], rtol=1e-6)
+    np.testing.assert_allclose(activation("mish")(x)[2], 3 * np.tanh(np.log1p(np.exp(3.0))), rtol=1e-6)
+    with pytest.raises(ValueError, match="unknown activation 'elu'.*relu"):
+        activation("elu")
+
+
+@pytest.mark.parametrize("filters,broken", [((32, 16, 12), "f1 < f2"), ((32, 128, 128), "f2 > f3"),
+                                            ((12, 128, 32), "f1 >= f3")])
+def test_fec_rule_names_the_broken_values(filters, broken):
+    with pytest.raises(ValueError, match=broken) as err:
+        check_fec_filters(filters)
+    assert str(filters[0]) in str(err.value) and str(filters[2]) in str(err.value)
+    with pytest.raises(ValueError):
+        FEC(filters).init(jax.random.key(0), jnp.zeros((1, 2, 3, 13)))
+
+
+def test_fec_is_three_pointwise_layers_without_batch_norm():
+    variables = FEC((32, 128, 12)).init(jax.random.key(0), jnp.zeros((1, 4, 3, 13)))
+    assert "batch_stats" not in variables
+    shapes = jax.tree.map(lambda a: a.shape, variables["params"])
+    assert shapes == {"conv1": {"kernel": (13, 32), "bias": (32,)}, "conv2": {"kernel": (32, 128), "bias": (128,)},
+                      "conv3": {"kernel": (128, 12), "bias": (12,)}}
+
+
+def test_decorate_points_offsets():
+    grid = Grid((0.0, 4.0), (-2.0, 2.0), (-2.0, 2.0), 1.0)
+    pts = np.zeros((1, 1, 2, 4), np.float32)
+    pts[0, 0, 0, :3] = [2.2, 0.4, 1.0]
+    pts[0, 0, 1, :3] = [2.6, 0.8, 0.0]
+    coords = np.array([[[2, 2]]], np.int32)  # cell x in [2, 3), y in [0, 1)
+    out = decorate_points(jnp.asarray(pts), jnp.array([[[True, True]]]), jnp.asarray(coords), grid)
+    np.testing.assert_allclose(out[0, 0, 0, 4:7], [-0.2, -0.2, 0.5], atol=1e-6)   # to point mean
+    np.testing.assert_allclose(out[0, 0, 0, 7:10], [-0.3, -0.1, 1.0], atol=1e-6)  # to pillar centre
+    masked = decorate_points(jnp.asarray(pts), jnp.array([[[True, False]]]), jnp.asarray(coords), grid)
+    assert float(jnp.abs(masked[0, 0, 1]).max()) == 0.0
+
+
+def test_masked_max_ignores_padding_and_zeroes_empty_pillars():
+    h = jnp.array([[[[1.0], [5.0]], [[-3.0], [-1.0]], [[7.0], [9.0]]]])
+    mask = jnp.array([[[True, False], [True, True], [False, False]]])
+    np.testing.assert_allclose(masked_max(h, mask)[0, :, 0], [1.0, -1.0, 0.0])
+
+
+def test_scatter_places_pillars_and_drops_unused_slots():
+    grid = Grid((0.0, 4.0), (-2.0, 2.0), (-2.0, 2.0), 1.0)
+    feats = jnp.arange(1, 7, dtype=jnp.float32).reshape(1, 3, 2)
+    coords = jnp.array([[[0, 3], [2, 1], [-1, -1]]])
+    bev = scatter_to_bev(feats, coords, grid)
+    assert bev.shape == (1, 4, 4, 2)
+    np.testing.assert_allclose(bev[0, 0, 3], [1, 2])
+    np.testing.assert_allclose(bev[0, 2, 1], [3, 4])
+    assert float(bev.sum()) == 10.0
+
+
+def test_residual_bottleneck_projects_when_shape_changes():
+    x = jnp.ones((1, 8, 8, 16))
+    block = ResidualBottleneck(32, stride=2)
+    variables = block.init(jax.random.key(0), x)
+    assert "proj" in variables["params"]
+    assert block.apply(variables, x).shape == (1, 4, 4, 32)
+    same = ResidualBottleneck(16, stride=1).init(jax.random.key(0), x)
+    assert "proj" not in same["params"]

@@ -1,0 +1,99 @@
+import jax
+import numpy as np
+import pytest
+
+from dsfec_jax import zoo
+from conftest import tiny
+
+# Pinned parameter counts (params collection; BN moving statistics excluded). A change here
+# changes the published size table: update dsfec_jax/profile/records/zoo.json with it.
+PINNED_PARAMS = {"baseline": 2_679_894, "dsfec_l": 2_397_486, "dsfec_m": 585_182, "dsfec_s": 296_942}
+
+
+def n_params(detector):
+    shapes = jax.eval_shape(detector.init, jax.random.key(0))
+    return sum(int(np.prod(x.shape)) for x in jax.tree.leaves(shapes["params"]))
+
+
+def test_available_lists_the_paper_variants():
+    assert zoo.available() == ["baseline", "dsfec_l", "dsfec_m", "dsfec_s"]
+
+
+@pytest.mark.parametrize("name", sorted(PINNED_PARAMS))
+def test_pinned_param_counts(name):
+    assert n_params(zoo.create(name)) == PINNED_PARAMS[name]
+
+
+def test_stage_blocks_follow_the_paper():
+    blocks = {n: zoo.config(n).stage_blocks for n in zoo.available()}
+    assert blocks == {"baseline": (3, 6, 6, 3), "dsfec_l": (3, 6, 6, 3), "dsfec_m": (3, 3, 2, 3), "dsfec_s": (1, 1, 3, 2)}
+    s = zoo.config("dsfec_s")
+    assert (s.act_fec, s.act_stem, s.act_backbone, s.act_car_head, s.act_truck_head, s.act_vru_head) == (
+        "relu", "leaky_relu", "leaky_relu", "swish", "swish", "relu")
+
+
+def test_overrides_are_applied_and_change_the_network():
+    d = zoo.create("dsfec_s", stem_filters=16, stage_blocks=[1, 3, 3, 2])
+    assert d.config.stem_filters == 16 and d.config.stage_blocks == (1, 3, 3, 2)
+    assert n_params(d) > PINNED_PARAMS["dsfec_s"]
+    assert zoo.config("dsfec_s").stem_filters == 12  # the registry is untouched
+
+
+def test_unknown_name_and_field_list_the_valid_ones():
+    with pytest.raises(KeyError, match="dsfec_l"):
+        zoo.create("dsfec_xl")
+    with pytest.raises(TypeError, match="stem_filters"):
+        zoo.create("dsfec_s", stem_filter=16)
+
+
+@pytest.mark.parametrize("override,field", [
+    ({"fec_filters": (32, 16, 12)}, "f1 < f2"), ({"stage_blocks": (1, 0, 3, 2)}, "stage_blocks"),
+    ({"act_stem": "elu"}, "act_stem"), ({"block": "mbconv"}, "block"), ({"stage_widths": (8, 8, 8)}, "stage_widths"),
+])
+def test_invalid_configs_fail_naming_the_field(override, field):
+    with pytest.raises(ValueError, match=field):
+        zoo.create("dsfec_l", **override)
+
+
+@pytest.mark.parametrize("name", ["baseline", "dsfec_l", "dsfec_m", "dsfec_s"])
+def test_outputs_finite_for_random_empty_and_full_inputs(name):
+    det = tiny(name)
+    variables = det.init(jax.random.key(0))
+    infer = jax.jit(det.apply)
+    nx, ny = det.config.grid.shape
+    stride = det.config.output_stride
+    for occupancy in (0.0, 0.3, 1.0):
+        out = infer(variables, det.dummy_inputs(2, seed=3, occupancy=occupancy))
+        assert set(out) == {"car", "truck", "vru"}
+        assert out["vru"]["cls"].shape == (2, nx // stride, ny // stride, 2)
+        assert out["car"]["box"].shape[-1] == 6
+        assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(out)), occupancy
+
+
+def test_jit_and_no_jit_agree():
+    det = tiny("dsfec_s")
+    variables = det.init(jax.random.key(1))
+    x = det.dummy_inputs(1, seed=5)
+    a = jax.jit(det.apply)(variables, x)
+    with jax.disable_jit():
+        b = det.apply(variables, x)
+    jax.tree.map(lambda u, v: np.testing.assert_allclose(u, v, atol=1e-4, rtol=1e-4), a, b)
+
+
+@pytest.mark.parametrize("name", ["dsfec_m", "baseline"])
+def test_grouped_and_shifted_depthwise_networks_agree(name):
+    shifted = tiny(name)
+    grouped = tiny(name, depthwise_impl="grouped")
+    variables = shifted.init(jax.random.key(2))
+    x = shifted.dummy_inputs(1, seed=7)
+    a, b = jax.jit(shifted.apply)(variables, x), jax.jit(grouped.apply)(variables, x)
+    jax.tree.map(lambda u, v: np.testing.assert_allclose(u, v, atol=1e-5, rtol=1e-5), a, b)
+
+
+def test_train_mode_updates_batch_stats():
+    det = tiny("dsfec_s")
+    variables = det.init(jax.random.key(0))
+    out, updates = jax.jit(lambda v, x: det.apply(v, x, train=True))(variables, det.dummy_inputs(2))
+    assert set(updates) == {"batch_stats"}
+    before, after = jax.tree.leaves(variables["batch_stats"]), jax.tree.leaves(updates["batch_stats"])
+    assert any(not np.allclose(a, b) for a, b in zip(before, after))
