@@ -1,7 +1,15 @@
+import tempfile
+
+import jax
 import pytest
 
 from dsfec_jax import zoo
 from dsfec_jax.grid import Grid
+
+# Tests rebuild identical networks many times: a per-session persistent compilation cache makes
+# the second compile of the same program a cache hit.
+jax.config.update("jax_compilation_cache_dir", tempfile.mkdtemp(prefix="dsfec-jax-cache-"))
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
 TINY_GRID = Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)  # 32 x 32
 

@@ -1,0 +1,62 @@
+"""From raw radar points to scored oriented boxes: pillarize (host, numpy) -> jitted network and
+decode -> rotated NMS per class (host)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import numpy as np
+
+from .boxes import priors
+from .boxes.decode import decode_heads
+from .boxes.nms import batched_rotated_nms
+from .boxes.pixor import cell_centres
+from .boxes.structures import Boxes
+from .data.frame import Frame
+from .data.pillarize import PillarSpec, pillarize, select_columns
+from .models.dsfec import HEAD_NAMES
+
+
+class Detections(NamedTuple):
+    boxes: Boxes
+    scores: np.ndarray
+
+
+class Predictor:
+    """`predictor(points_NxF | Frame) -> Detections`. Points' columns follow the model's
+    `point_features` unless a Frame (with named columns) is given."""
+
+    def __init__(self, detector, variables, score_threshold: float = 0.1, top_k: int = 100,
+                 nms_iou: float = 0.2, max_boxes: int = 500):
+        cfg = detector.config
+        self.detector, self.variables = detector, variables
+        self.spec = PillarSpec.of(cfg)
+        self.head_classes = dict(zip(HEAD_NAMES, cfg.head_classes))
+        self.class_names = [c for classes in self.head_classes.values() for c in classes]
+        self.score_threshold, self.nms_iou, self.max_boxes = score_threshold, nms_iou, max_boxes
+        cells = cell_centres(cfg.grid, cfg.output_stride)
+        self.network = jax.jit(lambda v, x: decode_heads(detector.apply(v, x), self.head_classes, cells, top_k))
+
+    def __call__(self, points) -> Detections:
+        return self.predict_batch([points])[0]
+
+    def predict_batch(self, items: list) -> list[Detections]:
+        arrays = [select_columns(p, self.spec.features) if isinstance(p, Frame) else np.asarray(p, np.float32)
+                  for p in items]
+        tensors = [pillarize(a, self.spec)[0] for a in arrays]
+        batch = {k: np.stack([t[k] for t in tensors]) for k in tensors[0]}
+        boxes, scores, labels = jax.device_get(self.network(self.variables, batch))
+        return [self._postprocess(b, s, l) for b, s, l in zip(boxes, scores, labels)]
+
+    def _postprocess(self, boxes, scores, labels) -> Detections:
+        keep = batched_rotated_nms(boxes.astype(np.float64), scores, labels, self.nms_iou,
+                                   max_output=self.max_boxes, score_threshold=self.score_threshold)
+        boxes, scores, labels = boxes[keep], scores[keep], labels[keep]
+        names = np.array([self.class_names[i] for i in labels], dtype="<U16")
+        h = np.array([priors.height(n) for n in names], np.float32)
+        z = np.array([priors.centre_z(n) for n in names], np.float32)
+        out = Boxes(np.column_stack([boxes[:, :2], z]).astype(np.float32),
+                    np.column_stack([boxes[:, 2:4], h]).astype(np.float32),
+                    boxes[:, 4].astype(np.float32), np.zeros((len(keep), 2), np.float32), names)
+        return Detections(out, scores.astype(np.float32))

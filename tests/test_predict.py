@@ -1,0 +1,48 @@
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from dsfec_jax.boxes.decode import decode_heads
+from dsfec_jax.boxes.nms import batched_rotated_nms
+from dsfec_jax.boxes.pixor import cell_centres
+from dsfec_jax.boxes.structures import Boxes
+from dsfec_jax.data.targets import detector_targets
+from dsfec_jax.grid import Grid
+from dsfec_jax.predict import Predictor
+from conftest import tiny
+from test_train_step import toy_frame
+
+GRID = Grid((0.0, 16.0), (-8.0, 8.0), (-2.5, 2.5), 0.5)
+HEADS = {"car": ("car",), "truck": ("truck",), "vru": ("pedestrian", "bicycle")}
+
+
+def test_perfect_head_maps_decode_to_the_ground_truth():
+    gt = Boxes(np.array([[4, -3, 0], [11, 3, 0], [13, -5, 0]], np.float32),
+               np.array([[1.8, 4.2, 1.5], [2.5, 8.0, 3.0], [0.6, 0.6, 1.7]], np.float32),
+               np.array([0.2, -0.4, 0.0], np.float32), np.zeros((3, 2), np.float32),
+               np.array(["car", "truck", "pedestrian"]))
+    t = detector_targets(gt, HEADS, GRID, 2)
+    # A perfect network: confident exactly where targets are positive, with exact box codes.
+    outputs = {h: {"cls": jnp.asarray(np.where(v["cls"] > 0, 8.0, -8.0))[None], "box": jnp.asarray(v["box"])[None]}
+               for h, v in t.items()}
+    boxes, scores, labels = jax.device_get(decode_heads(outputs, HEADS, cell_centres(GRID, 2), top_k=64))
+    keep = batched_rotated_nms(boxes[0].astype(np.float64), scores[0], labels[0], 0.2, score_threshold=0.5)
+    got = sorted((int(labels[0][k]), *np.round(boxes[0][k], 4)) for k in keep)
+    names = ["car", "truck", "pedestrian", "bicycle"]
+    want = sorted((names.index(n), c[0], c[1], s[0], s[1], y) for n, c, s, y in zip(gt.names, gt.center, gt.size, gt.yaw))
+    assert len(got) == 3
+    np.testing.assert_allclose(np.array(got), np.array(want), atol=1e-4)
+
+
+def test_predictor_from_points_and_frames():
+    det = tiny("dsfec_s")
+    predictor = Predictor(det, det.init(jax.random.key(0)), score_threshold=0.0, top_k=20, max_boxes=30)
+    frame = toy_frame(np.random.default_rng(0), det.config.grid)
+    a = predictor(frame)
+    b = predictor(frame.points)  # same columns as the model's point_features
+    assert len(a.boxes) == len(a.scores) <= 30
+    assert set(a.boxes.names) <= {"car", "truck", "pedestrian", "bicycle"}
+    np.testing.assert_allclose(a.scores, b.scores)
+    assert (np.diff(a.scores) <= 1e-7).all()  # sorted by score
+    empty = predictor(np.zeros((0, 7), np.float32))
+    assert np.isfinite(empty.scores).all()

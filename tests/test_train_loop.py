@@ -1,0 +1,57 @@
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from dsfec_jax import checkpoint
+from dsfec_jax.data.batches import BatchStream
+from dsfec_jax.data.pillarize import PillarSpec
+from dsfec_jax.models.dsfec import HEAD_NAMES
+from dsfec_jax.train.loop import RunSpec, TrainingDiverged, checkpoints, train
+from dsfec_jax.train.schedules import get_schedule
+from conftest import tiny
+from test_train_step import toy_frame
+
+
+def setup(tmp_path, name, lr=2e-3, total=6, stop_at=None, ckpt_every=2):
+    det = tiny("dsfec_s")
+    frames = [toy_frame(np.random.default_rng(i), det.config.grid) for i in range(6)]
+    stream = BatchStream(frames, PillarSpec.of(det.config), dict(zip(HEAD_NAMES, det.config.head_classes)),
+                         det.config.output_stride, batch_size=2, seed=7)
+    sched = get_schedule("quick", learning_rate=lr, warmup_steps=2, batch_size=2, steps=total)
+    spec = RunSpec(tmp_path / name, sched, seed=3, total_steps=total, stop_at=stop_at, log_every=1,
+                   ckpt_every=ckpt_every, keep=2, progress=False)
+    return det, stream, spec
+
+
+def test_batches_are_a_pure_function_of_the_step(tmp_path):
+    _, stream, _ = setup(tmp_path, "x")
+    a, b = stream.batch(4), stream.batch(4)
+    jax.tree.map(np.testing.assert_array_equal, a["inputs"], b["inputs"])
+    assert sorted(np.concatenate([stream.indices(s) for s in range(3)]).tolist()) == list(range(6))
+
+
+def test_resumed_run_ends_with_the_same_parameters(tmp_path):
+    det, stream, spec = setup(tmp_path, "straight")
+    straight = train(det, stream, spec, {"test": True})
+    det, stream, spec = setup(tmp_path, "resumed", stop_at=3)
+    train(det, stream, spec, {"test": True})
+    assert [p.name for p in checkpoints(spec.run_dir)] == ["step_0000002.msgpack", "step_0000003.msgpack"]
+    det, stream, spec = setup(tmp_path, "resumed")
+    resumed = train(det, stream, spec, {"test": True})
+    assert int(resumed["step"]) == int(straight["step"]) == 6
+    jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7), straight["params"], resumed["params"])
+    steps = [json.loads(l)["step"] for l in (spec.run_dir / "metrics.jsonl").read_text().splitlines()]
+    assert steps == [1, 2, 3, 4, 5, 6]
+    assert len(checkpoints(spec.run_dir)) == 2  # keep=2
+
+
+def test_divergence_stops_with_the_last_good_checkpoint_intact(tmp_path):
+    det, stream, spec = setup(tmp_path, "nan", lr=1e12, total=8, ckpt_every=1)
+    with pytest.raises(TrainingDiverged, match="Last good checkpoint"):
+        train(det, stream, spec, {"test": True})
+    last = checkpoints(spec.run_dir)
+    assert last, "at least one good step should have been checkpointed"
+    tree = checkpoint.load(last[-1])
+    assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(tree["params"]))
