@@ -14,6 +14,7 @@ weights, pillarization and box decoding, which models must not import.
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -75,3 +76,37 @@ class Detector:
 def create(name: str, /, **overrides) -> Detector:
     """A detector of the registered variant `name`, any config field overridden."""
     return Detector(config(name, **overrides))
+
+
+WEIGHTS_DIR = Path(__file__).parent / "weights"
+
+
+def shipped_weights(name: str) -> Path:
+    return WEIGHTS_DIR / f"{name}.msgpack"
+
+
+def load_variables(detector: Detector, path: str | Path) -> dict:
+    """{'params', 'batch_stats'} from a weights file or a training checkpoint, shape-checked."""
+    from . import checkpoint
+
+    raw = checkpoint.load(path)
+    missing = [k for k in ("params", "batch_stats") if k not in raw]
+    if missing:
+        raise ValueError(f"{path}: expected a variables tree with {missing}; found keys {sorted(raw)}")
+    target = jax.eval_shape(detector.init, jax.random.key(0))
+    return checkpoint.load(path, {"params": target["params"], "batch_stats": target["batch_stats"],
+                                  **{k: v for k, v in raw.items() if k not in ("params", "batch_stats")}})
+
+
+def load(name: str, /, weights: str | Path | None = None, predictor_options: dict | None = None, **overrides):
+    """A ready predictor: `zoo.load("dsfec_s")(points) -> Detections` (shipped weights by default)."""
+    from .predict import Predictor
+
+    detector = create(name, **overrides)
+    path = Path(weights) if weights else shipped_weights(name)
+    if not path.is_file():
+        raise FileNotFoundError(f"no weights at {path}" + ("" if weights else f": {name!r} ships no weights yet; "
+                                f"train with `dsfec train --model {name}` and pass --weights"))
+    variables = load_variables(detector, path)
+    return Predictor(detector, {"params": variables["params"], "batch_stats": variables["batch_stats"]},
+                     **(predictor_options or {}))

@@ -14,7 +14,7 @@ jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 TINY_GRID = Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)  # 32 x 32
 
 
-def tiny(name: str, **overrides):
+def tiny(name: str, /, **overrides):
     """A registered variant on a 32x32 grid with few pillar slots: same layers, cheap to compile."""
     overrides = {"grid": TINY_GRID, "max_pillars": 96, "max_points": 4, **overrides}
     return zoo.create(name, **overrides)

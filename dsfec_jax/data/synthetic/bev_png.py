@@ -7,6 +7,8 @@ Boxes are outlined per class with a heading tick and a 1 s velocity arrow.
 
 from __future__ import annotations
 
+import dataclasses
+
 import struct
 import zlib
 from pathlib import Path
@@ -48,10 +50,19 @@ def render_bev(frame: Frame, grid: Grid = DSFEC_GRID, px_per_m: float = 8.0) -> 
     return canvas.img
 
 
-def save_bev_png(frame: Frame, path, grid: Grid = DSFEC_GRID, px_per_m: float = 8.0) -> None:
+PREDICTION = (255, 0, 255)
+
+
+def save_bev_png(frame: Frame, path, grid: Grid = DSFEC_GRID, px_per_m: float = 8.0, predicted=None) -> None:
+    """The frame's points and ground-truth boxes (class colours); `predicted` Boxes in magenta."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic.write_bytes(path, png_bytes(render_bev(frame, grid, px_per_m)))
+    img = render_bev(frame, grid, px_per_m)
+    if predicted is not None:
+        canvas = _Canvas(grid, px_per_m)
+        canvas.img = img
+        canvas.boxes(dataclasses.replace(frame, boxes=predicted), override=PREDICTION)
+    atomic.write_bytes(path, png_bytes(img))
 
 
 class _Canvas:
@@ -106,7 +117,8 @@ class _Canvas:
                 ok &= (row < self.img.shape[0]) & (col < self.img.shape[1])
                 self.img[row[ok], col[ok]] = colors[ok]
 
-    def boxes(self, frame: Frame):
+    def boxes(self, frame: Frame, override=None):
+        """Boxes in their class colours, or all in `override` (e.g. predictions over ground truth)."""
         b = frame.boxes
         if len(b) == 0:
             return
@@ -118,5 +130,5 @@ class _Canvas:
             edges = np.stack([c, np.roll(c, -1, axis=1)], 2).reshape(-1, 2, 2)
             heading = np.stack([b.center[m, :2], front[m]], 1)
             arrow = np.stack([b.center[m, :2], b.center[m, :2] + b.velocity[m]], 1)
-            color = CLASS_COLORS.get(str(name), OTHER_CLASS)
+            color = override if override is not None else CLASS_COLORS.get(str(name), OTHER_CLASS)
             self.segments(np.concatenate([edges, heading, arrow]), color)

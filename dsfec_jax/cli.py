@@ -1,0 +1,167 @@
+"""`dsfec train | eval | predict` (also `python -m dsfec_jax ...`): thin commands over the library.
+
+    dsfec train   --model dsfec_s [--set stem_filters=16] [--data synthetic] [--schedule quick] --run-dir runs/s
+    dsfec eval    --model dsfec_s [--weights PATH] --data synthetic --split test --seed 0 --frames 200 --json
+    dsfec predict --model dsfec_s [--weights PATH] --data tj4d:PATH --split all --out pred.json [--png-dir DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import json
+import shlex
+import sys
+from pathlib import Path
+
+RUN_PILLARS = 2048  # pillar slots at run time: radar frames fill < 1000; weights do not depend on it
+
+
+def parse_overrides(items: list[str]) -> dict:
+    """`field=value` pairs; values are Python literals where they parse (3, (1,3,3,2), 'relu')."""
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise SystemExit(f"--set {item!r}: expected FIELD=VALUE")
+        try:
+            out[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            out[key] = value
+    return out
+
+
+def common(p: argparse.ArgumentParser, split: str) -> None:
+    p.add_argument("--model", required=True, help="a zoo name (dsfec_jax.zoo.available())")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
+    p.add_argument("--data", default="synthetic", help="synthetic | vod:PATH | tj4d:PATH | nuscenes:DATAROOT")
+    p.add_argument("--split", default=split)
+    p.add_argument("--frames", type=int, default=None, help="frames to use (synthetic: to generate)")
+    p.add_argument("--seed", type=int, default=0, help="data seed (synthetic) and init seed (train)")
+    p.add_argument("--max-pillars", type=int, default=RUN_PILLARS)
+
+
+def parse(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="dsfec", description="train, evaluate and run zoo detectors")
+    sub = p.add_subparsers(dest="command", required=True)
+    t = sub.add_parser("train", help="train a zoo model (resumes an existing run directory)")
+    common(t, "train")
+    t.add_argument("--run-dir", required=True)
+    t.add_argument("--schedule", default="quick", choices=("quick", "paper"))
+    t.add_argument("--steps", type=int, default=None, help="override the schedule's length")
+    t.add_argument("--batch-size", type=int, default=None)
+    t.add_argument("--val-frames", type=int, default=100)
+    t.add_argument("--eval-every", type=int, default=200)
+    t.add_argument("--no-augment", action="store_true")
+    for name, split in (("eval", "test"), ("predict", "test")):
+        q = sub.add_parser(name, help=f"{name} a zoo model")
+        common(q, split)
+        q.add_argument("--weights", default=None, help="weights/checkpoint file (default: shipped weights)")
+        q.add_argument("--score-threshold", type=float, default=0.05)
+        q.add_argument("--json", action="store_true")
+        if name == "predict":
+            q.add_argument("--out", required=True, help="nuScenes submission JSON to write")
+            q.add_argument("--png-dir", default=None, help="also write a BEV PNG per frame here")
+            q.add_argument("--gt-out", default=None, help="also write the frames' ground truth in the same format")
+    return p.parse_args(argv)
+
+
+def run_train(args) -> int:
+    from . import zoo
+    from .data.augment import AugmentConfig
+    from .data.batches import BatchStream
+    from .data.pillarize import PillarSpec
+    from .data.sources import load_frames
+    from .evaluate import evaluate
+    from .models.dsfec import HEAD_NAMES
+    from .predict import Predictor
+    from .profile.environment import versions
+    from .train.loop import RunSpec, train
+    from .train.schedules import get_schedule
+
+    overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
+    det = zoo.create(args.model, **overrides)
+    sched = get_schedule(args.schedule, **({"batch_size": args.batch_size} if args.batch_size else {}))
+    frames = load_frames(args.data, args.split, args.frames or (sched.batch_size * 100), args.seed)
+    val = load_frames(args.data, "val", args.val_frames, args.seed)
+    total = args.steps or sched.total_steps(len(frames))
+    cfg = det.config
+    stream = BatchStream(frames, PillarSpec.of(cfg), dict(zip(HEAD_NAMES, cfg.head_classes)), cfg.output_stride,
+                         sched.batch_size, args.seed, None if args.no_augment else AugmentConfig())
+    spec = RunSpec(Path(args.run_dir), sched, args.seed, total_steps=total)
+    info = {"command": "dsfec " + " ".join(shlex.quote(a) for a in sys.argv[1:]), "model": args.model,
+            "config": _jsonable(dataclasses.asdict(cfg)), "schedule": dataclasses.asdict(sched), "seed": args.seed,
+            "data": {"source": args.data, "split": args.split, "frames": len(frames), "val_frames": len(val)},
+            "versions": versions()}
+
+    def validate(state):
+        variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
+        return {k: v for k, v in evaluate(Predictor(det, variables), val).items() if k != "metrics"}
+
+    train(det, stream, spec, info, validate, args.eval_every)
+    print(json.dumps({"run_dir": str(spec.run_dir), "final": validate(_last_state(spec.run_dir))}))
+    return 0
+
+
+def _last_state(run_dir: Path) -> dict:
+    from . import checkpoint
+    from .train.loop import checkpoints
+
+    return checkpoint.load(checkpoints(run_dir)[-1])
+
+
+def _jsonable(obj):
+    return json.loads(json.dumps(obj, default=lambda o: dataclasses.asdict(o) if dataclasses.is_dataclass(o) else str(o)))
+
+
+def run_eval_or_predict(args) -> int:
+    from . import zoo
+    from .data.sources import load_frames
+    from .evaluate import headline, predict_frames, score
+
+    overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
+    predictor = zoo.load(args.model, weights=args.weights,
+                         predictor_options={"score_threshold": args.score_threshold}, **overrides)
+    frames = load_frames(args.data, args.split, args.frames, args.seed)
+    detections = predict_frames(predictor, frames)
+    if args.command == "predict":
+        write_predictions(args, frames, detections, predictor)
+    metrics = score(frames, detections)
+    result = {"model": args.model, "weights": str(args.weights or zoo.shipped_weights(args.model)),
+              "data": args.data, "split": args.split, "seed": args.seed, "frames": len(frames),
+              **headline(metrics), "metrics": metrics}
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        print(f"{args.model} on {args.data}/{args.split} ({len(frames)} frames): Car mAP {result['car_mAP']:.2f}  "
+              f"Car AP@4 {result['car_AP4']:.2f}  mAP(all classes) {result['mAP']:.2f}")
+    return 0
+
+
+def write_predictions(args, frames, detections, predictor) -> None:
+    from .metrics.nuscenes import boxes_to_entries, write_submission
+
+    results = {token: boxes_to_entries(token, d.boxes, d.scores) for token, d in detections.items()}
+    write_submission(args.out, results)
+    if args.gt_out:
+        gt = {frames[i].frame_id: boxes_to_entries(frames[i].frame_id, frames[i].boxes) for i in range(len(frames))}
+        write_submission(args.gt_out, gt, is_gt=True)
+    if args.png_dir:
+        from .data.synthetic.bev_png import save_bev_png
+        for i in range(len(frames)):
+            f = frames[i]
+            safe = f.frame_id.replace("/", "_") or f"frame_{i:06d}"
+            save_bev_png(f, Path(args.png_dir) / f"{safe}.png", predictor.detector.config.grid,
+                         predicted=detections[f.frame_id].boxes)
+
+
+def main(argv=None) -> int:
+    args = parse(argv)
+    if args.command == "train":
+        return run_train(args)
+    return run_eval_or_predict(args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

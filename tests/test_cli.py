@@ -1,0 +1,55 @@
+import json
+
+import pytest
+
+from dsfec_jax import cli, zoo
+from dsfec_jax.metrics import nuscenes
+from conftest import tiny
+
+
+@pytest.fixture
+def tiny_model(monkeypatch):
+    monkeypatch.setitem(zoo.REGISTRY, "tiny_s", tiny("dsfec_s", name="tiny_s").config)
+    return "tiny_s"
+
+
+def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
+    run = tmp_path / "run"
+    assert cli.main(["train", "--model", tiny_model, "--steps", "3", "--batch-size", "2", "--frames", "4",
+                     "--val-frames", "2", "--eval-every", "3", "--run-dir", str(run), "--max-pillars", "96"]) == 0
+    final = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert set(final["final"]) == {"car_mAP", "car_AP4", "mAP"}
+    info = json.loads((run / "run.json").read_text())
+    assert info["seed"] == 0 and info["config"]["name"] == "tiny_s" and info["versions"]["jax"]
+    ckpt = sorted((run / "checkpoints").glob("step_*.msgpack"))[-1]
+
+    assert cli.main(["eval", "--model", tiny_model, "--weights", str(ckpt), "--frames", "3", "--json",
+                     "--max-pillars", "96"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["frames"] == 3 and 0 <= result["car_AP4"] <= 100 and "AP" in result["metrics"]
+
+    pred, gt, png = tmp_path / "pred.json", tmp_path / "gt.json", tmp_path / "png"
+    assert cli.main(["predict", "--model", tiny_model, "--weights", str(ckpt), "--frames", "2", "--out", str(pred),
+                     "--gt-out", str(gt), "--png-dir", str(png), "--max-pillars", "96", "--json"]) == 0
+    in_process = json.loads(capsys.readouterr().out)["metrics"]
+    results, meta = nuscenes.read_submission(pred)
+    assert len(results) == 2 and meta["use_radar"]
+    assert len(list(png.glob("*.png"))) == 2
+    assert nuscenes.main(["--gt", str(gt), "--pred", str(pred)]) in (0, None)
+    offline = json.loads(capsys.readouterr().out)
+    for name in in_process["AP"]:  # the files carry everything the metric needs
+        assert offline["AP"][name] == pytest.approx(in_process["AP"][name])
+    assert offline["num_gt"] == in_process["num_gt"] and offline["num_pred"] == in_process["num_pred"]
+    assert sum(in_process["num_gt"].values()) > 0
+
+
+def test_load_without_shipped_weights_says_how_to_get_them(tiny_model):
+    with pytest.raises(FileNotFoundError, match="dsfec train --model tiny_s"):
+        zoo.load(tiny_model)
+
+
+def test_overrides_parse_literals():
+    assert cli.parse_overrides(["stage_blocks=(1,3,3,2)", "act_stem=mish", "stem_filters=16"]) == {
+        "stage_blocks": (1, 3, 3, 2), "act_stem": "mish", "stem_filters": 16}
+    with pytest.raises(SystemExit, match="FIELD=VALUE"):
+        cli.parse_overrides(["oops"])
