@@ -54,6 +54,8 @@ def parse(argv=None) -> argparse.Namespace:
     t.add_argument("--val-frames", type=int, default=100)
     t.add_argument("--eval-every", type=int, default=200)
     t.add_argument("--no-augment", action="store_true")
+    t.add_argument("--window", type=int, default=96,
+                   help="train on overlapping WxW-cell windows of the grid (0 = the whole grid)")
     for name, split in (("eval", "test"), ("predict", "test")):
         q = sub.add_parser(name, help=f"{name} a zoo model")
         common(q, split)
@@ -70,7 +72,7 @@ def parse(argv=None) -> argparse.Namespace:
 def run_train(args) -> int:
     from . import zoo
     from .data.augment import AugmentConfig
-    from .data.batches import BatchStream
+    from .data.batches import BatchStream, training_windows
     from .data.pillarize import PillarSpec
     from .data.sources import load_frames
     from .evaluate import evaluate
@@ -87,19 +89,21 @@ def run_train(args) -> int:
     val = load_frames(args.data, "val", args.val_frames, args.seed)
     total = args.steps or sched.total_steps(len(frames))
     cfg = det.config
-    stream = BatchStream(frames, PillarSpec.of(cfg), dict(zip(HEAD_NAMES, cfg.head_classes)), cfg.output_stride,
-                         sched.batch_size, args.seed, None if args.no_augment else AugmentConfig())
+    windows = [zoo.create(args.model, **overrides, grid=g) for g in training_windows(cfg.grid, args.window or None)]
+    stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], dict(zip(HEAD_NAMES, cfg.head_classes)),
+                         cfg.output_stride, sched.batch_size, args.seed, None if args.no_augment else AugmentConfig())
     spec = RunSpec(Path(args.run_dir), sched, args.seed, total_steps=total)
     info = {"command": "dsfec " + " ".join(shlex.quote(a) for a in sys.argv[1:]), "model": args.model,
             "config": _jsonable(dataclasses.asdict(cfg)), "schedule": dataclasses.asdict(sched), "seed": args.seed,
             "data": {"source": args.data, "split": args.split, "frames": len(frames), "val_frames": len(val)},
+            "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows],
             "versions": versions()}
 
     def validate(state):
         variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
         return {k: v for k, v in evaluate(Predictor(det, variables), val).items() if k != "metrics"}
 
-    train(det, stream, spec, info, validate, args.eval_every)
+    train(det, stream, spec, info, validate, args.eval_every, window_detectors=windows)
     print(json.dumps({"run_dir": str(spec.run_dir), "final": validate(_last_state(spec.run_dir))}))
     return 0
 
@@ -127,7 +131,7 @@ def run_eval_or_predict(args) -> int:
     detections = predict_frames(predictor, frames)
     if args.command == "predict":
         write_predictions(args, frames, detections, predictor)
-    metrics = score(frames, detections)
+    metrics = score(frames, detections, grid=predictor.detector.config.grid)
     result = {"model": args.model, "weights": str(args.weights or zoo.shipped_weights(args.model)),
               "data": args.data, "split": args.split, "seed": args.seed, "frames": len(frames),
               **headline(metrics), "metrics": metrics}
@@ -145,7 +149,9 @@ def write_predictions(args, frames, detections, predictor) -> None:
     results = {token: boxes_to_entries(token, d.boxes, d.scores) for token, d in detections.items()}
     write_submission(args.out, results)
     if args.gt_out:
-        gt = {frames[i].frame_id: boxes_to_entries(frames[i].frame_id, frames[i].boxes) for i in range(len(frames))}
+        from .evaluate import in_grid
+        grid = predictor.detector.config.grid  # the boxes the metric scores: those on the model's grid
+        gt = {f.frame_id: boxes_to_entries(f.frame_id, in_grid(f.boxes, grid)) for f in (frames[i] for i in range(len(frames)))}
         write_submission(args.gt_out, gt, is_gt=True)
     if args.png_dir:
         from .data.synthetic.bev_png import save_bev_png

@@ -18,11 +18,21 @@ def predict_frames(predictor: Predictor, frames: Sequence[Frame], batch_size: in
     return out
 
 
-def score(frames: Sequence[Frame], detections: dict[str, Detections], classes=nuscenes.DSFEC_CLASSES) -> dict:
+def in_grid(boxes, grid):
+    """Boxes whose centre lies on the grid: what a detector on that grid can find."""
+    c = boxes.center
+    return boxes.select((c[:, 0] >= grid.x_range[0]) & (c[:, 0] < grid.x_range[1])
+                        & (c[:, 1] >= grid.y_range[0]) & (c[:, 1] < grid.y_range[1]))
+
+
+def score(frames: Sequence[Frame], detections: dict[str, Detections], classes=nuscenes.DSFEC_CLASSES,
+          grid=None) -> dict:
     """nuScenes AP per class and threshold, class mAPs, AP@4. Ground-truth boxes are all kept
-    (radar-only frames have no lidar count for the devkit's num_pts == 0 filter); the devkit's
-    class ranges (car 50 m, pedestrian 40 m, ...) apply, measured from the sensor."""
-    gt = {f.frame_id: f.boxes for f in (frames[i] for i in range(len(frames)))}
+    (radar-only frames have no lidar count for the devkit's num_pts == 0 filter) except, with
+    `grid`, those centred off the detector's grid (DSFEC sees X 0..80 m only, not 360 degrees);
+    the devkit's class ranges (car 50 m, pedestrian 40 m, ...) apply, measured from the sensor."""
+    frames = [frames[i] for i in range(len(frames))]
+    gt = {f.frame_id: (in_grid(f.boxes, grid) if grid is not None else f.boxes) for f in frames}
     pred = {token: (d.boxes, d.scores) for token, d in detections.items()}
     return nuscenes.evaluate(gt, pred, classes=classes, drop_empty_gt=False)
 
@@ -36,5 +46,5 @@ def headline(metrics: dict) -> dict:
 
 
 def evaluate(predictor: Predictor, frames: Sequence[Frame], classes=nuscenes.DSFEC_CLASSES) -> dict:
-    metrics = score(frames, predict_frames(predictor, frames), classes)
+    metrics = score(frames, predict_frames(predictor, frames), classes, predictor.detector.config.grid)
     return {**headline(metrics), "metrics": metrics}

@@ -16,11 +16,13 @@ def tiny_model(monkeypatch):
 def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
     run = tmp_path / "run"
     assert cli.main(["train", "--model", tiny_model, "--steps", "3", "--batch-size", "2", "--frames", "4",
-                     "--val-frames", "2", "--eval-every", "3", "--run-dir", str(run), "--max-pillars", "96"]) == 0
+                     "--val-frames", "2", "--eval-every", "3", "--run-dir", str(run), "--max-pillars", "96",
+                     "--window", "16"]) == 0
     final = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert set(final["final"]) == {"car_mAP", "car_AP4", "mAP"}
     info = json.loads((run / "run.json").read_text())
     assert info["seed"] == 0 and info["config"]["name"] == "tiny_s" and info["versions"]["jax"]
+    assert len(info["windows"]) == 4  # 16x16-cell windows of the 32x32 grid
     ckpt = sorted((run / "checkpoints").glob("step_*.msgpack"))[-1]
 
     assert cli.main(["eval", "--model", tiny_model, "--weights", str(ckpt), "--frames", "3", "--json",

@@ -55,3 +55,14 @@ def test_divergence_stops_with_the_last_good_checkpoint_intact(tmp_path):
     assert last, "at least one good step should have been checkpointed"
     tree = checkpoint.load(last[-1])
     assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(tree["params"]))
+
+
+def test_training_windows_cover_the_grid_with_equal_shapes():
+    from dsfec_jax.data.batches import training_windows
+    from dsfec_jax.grid import DSFEC_GRID
+
+    windows = training_windows(DSFEC_GRID, 96)
+    assert {w.shape for w in windows} == {(96, 96)} and len(windows) == 4
+    assert min(w.x_range[0] for w in windows) == 0 and max(w.x_range[1] for w in windows) == 80
+    assert min(w.y_range[0] for w in windows) == -40 and max(w.y_range[1] for w in windows) == 40
+    assert training_windows(DSFEC_GRID, None) == [DSFEC_GRID] == training_windows(DSFEC_GRID, 160)

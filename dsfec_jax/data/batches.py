@@ -3,6 +3,11 @@
 Batch `s` of a run depends only on (seed, s): the frame order is a permutation per epoch drawn
 from (seed, epoch) and augmentation draws from (seed, s). So a resumed run sees exactly the
 batches an uninterrupted one would, with no iterator state to save.
+
+Training windows: a fully convolutional detector's weights do not depend on its grid, so it can
+train on overlapping sub-windows of the grid (cycled per step) at a fraction of the cost and run
+on the whole grid. Each window is a Grid of the same shape, so the network compiles once per
+window.
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ import jax
 import numpy as np
 
 from .augment import AugmentConfig, augment
+from ..grid import Grid
 from .frame import Frame
 from .pillarize import PillarSpec, pillarize_frames
 from .targets import detector_targets
@@ -24,12 +30,31 @@ def collate(frames: list[Frame], spec: PillarSpec, head_classes: dict, stride: i
     return {"inputs": inputs, "targets": jax.tree.map(lambda *x: np.stack(x), *targets), "stats": stats}
 
 
+def training_windows(grid: Grid, cells: int | None) -> list[Grid]:
+    """Overlapping square windows of `cells` x `cells` covering `grid` (corners first); None or a
+    size >= the grid gives the grid itself."""
+    nx, ny = grid.shape
+    if cells is None or (cells >= nx and cells >= ny):
+        return [grid]
+    span = cells * grid.cell
+
+    def starts(lo, hi):  # the fewest evenly spaced windows that cover [lo, hi]
+        n = int(np.ceil((hi - lo) / span - 1e-9))
+        return np.linspace(lo, hi - span, n) if n > 1 else [lo]
+
+    return [Grid((float(x), float(x + span)), (float(y), float(y + span)), grid.z_range, grid.cell)
+            for x in starts(*grid.x_range) for y in starts(*grid.y_range)]
+
+
 class BatchStream:
-    def __init__(self, frames: Sequence[Frame], spec: PillarSpec, head_classes: dict, stride: int,
-                 batch_size: int, seed: int, augment_cfg: AugmentConfig | None = AugmentConfig()):
+    """Batch `s`: frames of (seed, s) pillarized for window `window(s)` of `specs`."""
+
+    def __init__(self, frames: Sequence[Frame], specs: list[PillarSpec] | PillarSpec, head_classes: dict,
+                 stride: int, batch_size: int, seed: int, augment_cfg: AugmentConfig | None = AugmentConfig()):
         if len(frames) < batch_size:
             raise ValueError(f"{len(frames)} training frames cannot fill a batch of {batch_size}")
-        self.frames, self.spec, self.head_classes, self.stride = frames, spec, head_classes, stride
+        self.specs = specs if isinstance(specs, list) else [specs]
+        self.frames, self.head_classes, self.stride = frames, head_classes, stride
         self.batch_size, self.seed, self.augment_cfg = batch_size, seed, augment_cfg
         self.per_epoch = len(frames) // batch_size
 
@@ -38,9 +63,12 @@ class BatchStream:
         order = np.random.default_rng([self.seed, epoch]).permutation(len(self.frames))
         return order[pos * self.batch_size : (pos + 1) * self.batch_size]
 
+    def window(self, step: int) -> int:
+        return step % len(self.specs)
+
     def batch(self, step: int) -> dict:
         rng = np.random.default_rng([self.seed, 1_000_003, step])
         frames = [self.frames[int(i)] for i in self.indices(step)]
         if self.augment_cfg is not None:
             frames = [augment(f, self.augment_cfg, rng) for f in frames]
-        return collate(frames, self.spec, self.head_classes, self.stride)
+        return collate(frames, self.specs[self.window(step)], self.head_classes, self.stride)

@@ -71,8 +71,9 @@ def _save(spec: RunSpec, state: dict, step: int, extra: dict) -> None:
 
 def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
           evaluate: Callable[[dict], dict] | None = None, eval_every: int | None = None,
-          best_key: str = "car_mAP") -> dict:
-    """Train (or resume) in spec.run_dir; returns the final state. `evaluate(state) -> metrics`."""
+          best_key: str = "car_mAP", window_detectors: list | None = None) -> dict:
+    """Train (or resume) in spec.run_dir; returns the final state. `evaluate(state) -> metrics`.
+    `window_detectors[i]` (same weights, grid = the stream's window i) trains on window i."""
     spec.run_dir.mkdir(parents=True, exist_ok=True)
     atomic.write_json(spec.run_dir / "run.json", run_info)
     tx = optimizer(spec.schedule, spec.total_steps)
@@ -80,7 +81,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     start = int(state["step"])
     log_path = spec.run_dir / "metrics.jsonl"
     _trim_metrics(log_path, start)
-    step_fn = make_train_step(detector, tx, spec.loss)
+    step_fns = [make_train_step(d, tx, spec.loss) for d in (window_detectors or [detector])]
     end = spec.total_steps if spec.stop_at is None else min(spec.stop_at, spec.total_steps)
     best = _best_score(spec.run_dir, best_key)
     bar = tqdm(range(start, end), initial=start, total=end, disable=not spec.progress, desc=detector.name)
@@ -88,6 +89,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     with open(log_path, "a") as log:
         for step in bar:
             batch = stream.batch(step)
+            step_fn = step_fns[stream.window(step) % len(step_fns)]
             state, metrics = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]})
             loss = float(metrics["loss"])
             if not math.isfinite(loss):
