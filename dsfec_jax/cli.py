@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import ast
-import dataclasses
 import json
 import shlex
 import sys
@@ -70,53 +69,20 @@ def parse(argv=None) -> argparse.Namespace:
 
 
 def run_train(args) -> int:
-    from . import zoo
-    from .data.augment import AugmentConfig
-    from .data.batches import BatchStream, training_windows
-    from .data.pillarize import PillarSpec
     from .data.sources import load_frames
-    from .evaluate import evaluate
-    from .models.dsfec import HEAD_NAMES
-    from .predict import Predictor
-    from .profile.environment import versions
-    from .train.loop import RunSpec, train
+    from .train.fit import fit
     from .train.schedules import get_schedule
 
     overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
-    det = zoo.create(args.model, **overrides)
     sched = get_schedule(args.schedule, **({"batch_size": args.batch_size} if args.batch_size else {}))
     frames = load_frames(args.data, args.split, args.frames or (sched.batch_size * 100), args.seed)
     val = load_frames(args.data, "val", args.val_frames, args.seed)
-    total = args.steps or sched.total_steps(len(frames))
-    cfg = det.config
-    windows = [zoo.create(args.model, **overrides, grid=g) for g in training_windows(cfg.grid, args.window or None)]
-    stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], dict(zip(HEAD_NAMES, cfg.head_classes)),
-                         cfg.output_stride, sched.batch_size, args.seed, None if args.no_augment else AugmentConfig())
-    spec = RunSpec(Path(args.run_dir), sched, args.seed, total_steps=total)
-    info = {"command": "dsfec " + " ".join(shlex.quote(a) for a in sys.argv[1:]), "model": args.model,
-            "config": _jsonable(dataclasses.asdict(cfg)), "schedule": dataclasses.asdict(sched), "seed": args.seed,
-            "data": {"source": args.data, "split": args.split, "frames": len(frames), "val_frames": len(val)},
-            "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows],
-            "versions": versions()}
-
-    def validate(state):
-        variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
-        return {k: v for k, v in evaluate(Predictor(det, variables), val).items() if k != "metrics"}
-
-    train(det, stream, spec, info, validate, args.eval_every, window_detectors=windows)
-    print(json.dumps({"run_dir": str(spec.run_dir), "final": validate(_last_state(spec.run_dir))}))
+    info = {"command": "dsfec " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+            "data": {"source": args.data, "split": args.split}}
+    _, _, final = fit(args.model, overrides, frames, val, sched, args.run_dir, args.seed, args.steps,
+                      args.window or None, not args.no_augment, args.eval_every, info)
+    print(json.dumps({"run_dir": str(args.run_dir), "final": final}))
     return 0
-
-
-def _last_state(run_dir: Path) -> dict:
-    from . import checkpoint
-    from .train.loop import checkpoints
-
-    return checkpoint.load(checkpoints(run_dir)[-1])
-
-
-def _jsonable(obj):
-    return json.loads(json.dumps(obj, default=lambda o: dataclasses.asdict(o) if dataclasses.is_dataclass(o) else str(o)))
 
 
 def run_eval_or_predict(args) -> int:
@@ -144,7 +110,7 @@ def run_eval_or_predict(args) -> int:
 
 
 def write_predictions(args, frames, detections, predictor) -> None:
-    from .metrics.nuscenes import boxes_to_entries, write_submission
+    from .metrics.submission import boxes_to_entries, write_submission
 
     results = {token: boxes_to_entries(token, d.boxes, d.scores) for token, d in detections.items()}
     write_submission(args.out, results)

@@ -3,7 +3,7 @@ import json
 import pytest
 
 from dsfec_jax import cli, zoo
-from dsfec_jax.metrics import nuscenes
+from dsfec_jax.metrics import nuscenes, submission
 from conftest import tiny
 
 
@@ -34,7 +34,7 @@ def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
     assert cli.main(["predict", "--model", tiny_model, "--weights", str(ckpt), "--frames", "2", "--out", str(pred),
                      "--gt-out", str(gt), "--png-dir", str(png), "--max-pillars", "96", "--json"]) == 0
     in_process = json.loads(capsys.readouterr().out)["metrics"]
-    results, meta = nuscenes.read_submission(pred)
+    results, meta = submission.read_submission(pred)
     assert len(results) == 2 and meta["use_radar"]
     assert len(list(png.glob("*.png"))) == 2
     assert nuscenes.main(["--gt", str(gt), "--pred", str(pred)]) in (0, None)

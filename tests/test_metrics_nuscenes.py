@@ -11,6 +11,7 @@ import pytest
 
 from dsfec_jax.data.frame import Boxes
 from dsfec_jax.metrics import nuscenes as nm
+from dsfec_jax.metrics import submission as sub
 
 REPO = Path(__file__).resolve().parents[1]
 # nuscenes-devkit 1.2.0 (detection_cvpr_2019) on the fixture, class car.
@@ -21,7 +22,7 @@ DEVKIT_TRANS_ERR_2M = 0.5271580082617457
 
 def box(tok, x, y, score=None, name="car", **extra):
     b = {"sample_token": tok, "translation": [x, y, 0.0], "size": [1.9, 4.5, 1.6],
-         "rotation": nm.yaw_to_quaternion(0.0), "velocity": [0.0, 0.0], "detection_name": name,
+         "rotation": sub.yaw_to_quaternion(0.0), "velocity": [0.0, 0.0], "detection_name": name,
          "attribute_name": "", **extra}
     if score is not None:
         b["detection_score"] = score
@@ -69,8 +70,8 @@ def test_fixture_through_evaluate_gives_dsfec_numbers():
 
 
 def test_project_boxes_give_the_same_numbers():
-    gt = {t: nm.entries_to_boxes(v)[0] for t, v in fixture_gt().items()}
-    pred = {t: nm.entries_to_boxes(v) for t, v in fixture_pred().items()}
+    gt = {t: sub.entries_to_boxes(v)[0] for t, v in fixture_gt().items()}
+    pred = {t: sub.entries_to_boxes(v) for t, v in fixture_pred().items()}
     ref = nm.evaluate(fixture_gt(), fixture_pred())["AP"]["car"]
     assert nm.evaluate(gt, pred)["AP"]["car"] == pytest.approx(ref, abs=1e-6)  # float32 boxes, float32 scores
 
@@ -81,7 +82,7 @@ def test_perfect_predictions_give_ap_1():
     gt = {"a": [box("a", 5, 1), box("a", 12, -3)], "b": [box("b", 20, 4)]}
     pred = {t: [dict(b, detection_score=0.9 - 0.1 * i) for i, b in enumerate(v)] for t, v in gt.items()}
     for th in nm.DIST_THS:
-        md = nm.accumulate(nm.validate_results(gt, is_gt=True), nm.validate_results(pred), "car", th)
+        md = nm.accumulate(sub.validate_results(gt, is_gt=True), sub.validate_results(pred), "car", th)
         assert nm.calc_ap(md) == pytest.approx(1.0, abs=1e-12)  # same float arithmetic as the devkit: 1 + 4e-16
         assert md.max_recall == 1.0 and nm.calc_tp(md, 0.1, "trans_err") == 0.0
 
@@ -171,9 +172,9 @@ def test_boxes_entries_round_trip():
     f32 = lambda x: np.array(x, np.float32)  # noqa: E731
     boxes = Boxes(f32([[1, 2, 0.5], [3, -4, 1]]), f32([[1.9, 4.5, 1.6], [0.6, 0.8, 1.7]]), f32([0.3, -2.9]),
                   f32([[1, 0], [0, -1]]), np.array(["car", "pedestrian"]))
-    entries = nm.boxes_to_entries("tok", boxes, scores=np.array([0.8, 0.3]))
+    entries = sub.boxes_to_entries("tok", boxes, scores=np.array([0.8, 0.3]))
     assert entries[0]["rotation"] == pytest.approx([np.cos(0.15), 0, 0, np.sin(0.15)])
-    back, scores = nm.entries_to_boxes(entries)
+    back, scores = sub.entries_to_boxes(entries)
     for f in ("center", "size", "yaw", "velocity"):
         np.testing.assert_allclose(getattr(back, f), getattr(boxes, f), atol=1e-6)
     assert list(back.names) == ["car", "pedestrian"] and scores == pytest.approx([0.8, 0.3])
@@ -181,14 +182,14 @@ def test_boxes_entries_round_trip():
 
 def test_submission_json_round_trip(tmp_path):
     path = tmp_path / "pred.json"
-    pred = nm.validate_results(fixture_pred())
-    nm.write_submission(path, pred)
-    results, meta = nm.read_submission(path)
+    pred = sub.validate_results(fixture_pred())
+    sub.write_submission(path, pred)
+    results, meta = sub.read_submission(path)
     assert results == pred
     assert meta == {"use_camera": False, "use_lidar": False, "use_radar": True, "use_map": False, "use_external": False}
     gt_path = tmp_path / "gt.json"
-    nm.write_submission(gt_path, fixture_gt(), is_gt=True)
-    gt, _ = nm.read_submission(gt_path, is_gt=True)
+    sub.write_submission(gt_path, fixture_gt(), is_gt=True)
+    gt, _ = sub.read_submission(gt_path, is_gt=True)
     assert gt["s1"][2]["detection_name"] == "pedestrian" and gt["s1"][2]["detection_score"] == -1.0
 
 
@@ -204,7 +205,7 @@ def test_malformed_box_names_file_sample_and_field(tmp_path, field, value):
     path = tmp_path / "bad.json"
     path.write_text(json.dumps({"meta": {"use_radar": True}, "results": {"s0": [box("s0", 1, 2, 0.5)], "s1": [bad]}}))
     with pytest.raises(ValueError) as err:
-        nm.read_submission(path)
+        sub.read_submission(path)
     msg = str(err.value)
     assert str(path) in msg and "'s1'" in msg and f"'{field}'" in msg
 
@@ -216,14 +217,14 @@ def test_malformed_file_names_field(tmp_path, text, field):
     path = tmp_path / "bad.json"
     path.write_text(text)
     with pytest.raises(ValueError, match=re.escape(str(path))) as err:
-        nm.read_submission(path)
+        sub.read_submission(path)
     assert field in str(err.value)
 
 
 def test_cli_prints_the_devkit_numbers(tmp_path):
     gt, pred = tmp_path / "gt.json", tmp_path / "pred.json"
-    nm.write_submission(gt, fixture_gt(), is_gt=True)
-    nm.write_submission(pred, fixture_pred())
+    sub.write_submission(gt, fixture_gt(), is_gt=True)
+    sub.write_submission(pred, fixture_pred())
     cmd = [sys.executable, "-m", "dsfec_jax.metrics.nuscenes", "--gt", str(gt), "--pred", str(pred), "--classes", "car"]
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr

@@ -34,12 +34,12 @@ def test_batches_are_a_pure_function_of_the_step(tmp_path):
 
 def test_resumed_run_ends_with_the_same_parameters(tmp_path):
     det, stream, spec = setup(tmp_path, "straight")
-    straight = train(det, stream, spec, {"test": True})
+    straight, _ = train(det, stream, spec, {"test": True})
     det, stream, spec = setup(tmp_path, "resumed", stop_at=3)
     train(det, stream, spec, {"test": True})
     assert [p.name for p in checkpoints(spec.run_dir)] == ["step_0000002.msgpack", "step_0000003.msgpack"]
     det, stream, spec = setup(tmp_path, "resumed")
-    resumed = train(det, stream, spec, {"test": True})
+    resumed, _ = train(det, stream, spec, {"test": True})
     assert int(resumed["step"]) == int(straight["step"]) == 6
     jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7), straight["params"], resumed["params"])
     steps = [json.loads(l)["step"] for l in (spec.run_dir / "metrics.jsonl").read_text().splitlines()]

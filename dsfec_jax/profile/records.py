@@ -47,13 +47,13 @@ def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int
             variables = d.init(jax.random.key(0))
             suites[d.name] = latency.stage_functions(d, variables, d.dummy_inputs(1))
         times = latency.time_interleaved(suites, repeats, warmup)
-        for rec in records:
+        for rec, d in zip(records, detectors):
             t = times[rec["model"]]
             rec["latency_ms"] = round(t["total"]["median_ms"], 3)
             rec["latency_p90_ms"] = round(t["total"]["p90_ms"], 3)
             rec["latency_per_stage_ms"] = {s: round(t[s]["median_ms"], 3) for s in latency.STAGES}
             rec["latency_setup"] = {"batch": 1, "repeats": repeats, "warmup": warmup, "interleaved": True,
-                                    "depthwise_impl": "shifted", **env}
+                                    "depthwise_impl": d.config.depthwise_impl, **env}
     else:
         for rec in records:
             rec["latency_ms"] = None

@@ -71,8 +71,9 @@ def _save(spec: RunSpec, state: dict, step: int, extra: dict) -> None:
 
 def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
           evaluate: Callable[[dict], dict] | None = None, eval_every: int | None = None,
-          best_key: str = "car_mAP", window_detectors: list | None = None) -> dict:
-    """Train (or resume) in spec.run_dir; returns the final state. `evaluate(state) -> metrics`.
+          best_key: str = "car_mAP", window_detectors: list | None = None) -> tuple[dict, dict | None]:
+    """Train (or resume) in spec.run_dir -> (final state, last evaluation or None).
+    `evaluate(state) -> metrics` runs every `eval_every` steps and at the end.
     `window_detectors[i]` (same weights, grid = the stream's window i) trains on window i."""
     spec.run_dir.mkdir(parents=True, exist_ok=True)
     atomic.write_json(spec.run_dir / "run.json", run_info)
@@ -84,6 +85,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     step_fns = [make_train_step(d, tx, spec.loss) for d in (window_detectors or [detector])]
     end = spec.total_steps if spec.stop_at is None else min(spec.stop_at, spec.total_steps)
     best = _best_score(spec.run_dir, best_key)
+    scores = None
     bar = tqdm(range(start, end), initial=start, total=end, disable=not spec.progress, desc=detector.name)
     t0 = time.perf_counter()
     with open(log_path, "a") as log:
@@ -113,7 +115,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                                     {"step": done, best_key: best, "eval": scores})
             if done % spec.ckpt_every == 0 or done == end:
                 _save(spec, state, done, {"loss": loss})
-    return state
+    return state, scores
 
 
 def _best_score(run_dir: Path, key: str) -> float:
