@@ -46,8 +46,10 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
             "steps": total, "train_frames": len(frames), "val_frames": len(val),
             "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows], "versions": versions()}
 
-    def validate(state):
-        return {k: v for k, v in evaluate(Predictor(det, state_variables(state)), val).items() if k != "metrics"}
+    def validate(state):  # headline figures plus every class's mAP and AP@4 (small enough to log)
+        result = evaluate(Predictor(det, state_variables(state)), val)
+        m = result.pop("metrics")
+        return {**result, "class_mAP": m["class_mAP"], "AP@4": m.get("AP@4", {})}
 
     state, scores = train(det, stream, spec, info, validate, eval_every or total, window_detectors=windows)
     return det, state, scores if scores is not None else validate(state)

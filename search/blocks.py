@@ -1,0 +1,24 @@
+"""Blocks per stage (DSFEC Table 3): python -m search.blocks --stage 2 [--values 1,2,3,4,5,6] [--base dsfec_l]"""
+
+from __future__ import annotations
+
+from dsfec_jax import zoo
+
+from .cli import parser, run_search
+from .space import Axis, candidates
+
+
+def main(argv=None) -> int:
+    p = parser("python -m search.blocks", __doc__)
+    p.add_argument("--stage", type=int, required=True, choices=(1, 2, 3, 4))
+    p.add_argument("--values", default="1,2,3,4,5,6", help="block counts to try")
+    args = p.parse_args(argv)
+    values = tuple(int(v) for v in args.values.split(","))
+    axis = Axis(f"stage{args.stage}_blocks", values)
+    base_blocks = zoo.config(args.base).stage_blocks[args.stage - 1]
+    return run_search(args, f"{args.base}_stage{args.stage}_blocks", lambda: candidates(args.base, [axis]),
+                      f"{args.base}: blocks in stage {args.stage}", axis.label(base_blocks))
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,46 @@
+"""Flags and the run shared by the search entry points (blocks, stem, activations, grid)."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from dsfec_jax import atomic
+
+from .recipes import RECIPES
+from .report import write_reports
+from .runners import run_local
+from .space import SearchSpaceError
+from .trial import make_trial
+
+
+def parser(prog: str, doc: str, base: str = "dsfec_l") -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=prog, description=doc.strip().splitlines()[0])
+    p.add_argument("--base", default=base, help="registered model the candidates override")
+    p.add_argument("--profile", default="quick", choices=sorted(RECIPES), help="training recipe per trial")
+    p.add_argument("--data", default="synthetic", help="synthetic | vod:PATH | tj4d:PATH | nuscenes:DATAROOT")
+    p.add_argument("--out", default=None, help="RUN_DIR (default runs/search/<name>); re-running resumes it")
+    p.add_argument("--seeds", type=int, default=1, help="repeat each candidate with this many seeds")
+    p.set_defaults(prog=prog)
+    return p
+
+
+def run_search(args, name: str, candidates_fn, title: str, base_label: str | None) -> int:
+    """Validate every candidate first, then run the missing trials and write the reports."""
+    try:
+        candidates = candidates_fn()
+    except SearchSpaceError as err:
+        sys.exit(str(err))
+    run_dir = Path(args.out or Path("runs") / "search" / name)
+    command = f"{args.prog} " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    atomic.write_json(run_dir / "search.json", {"title": title, "base": args.base, "base_label": base_label,
+                                                "profile": args.profile, "data": args.data, "seeds": args.seeds,
+                                                "command": command, "candidates": [c["label"] for c in candidates]})
+    trials = [make_trial(args.base, c, args.profile, args.data, seed) for c in candidates for seed in range(args.seeds)]
+    run_local(trials, run_dir)
+    out = write_reports(run_dir)
+    print((run_dir / "report.md").read_text())
+    print(f"reports in {run_dir}: " + ", ".join(out["files"]))
+    return 0

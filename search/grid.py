@@ -1,0 +1,24 @@
+"""Any product of config overrides of a registered model:
+python -m search.grid --base dsfec_s --axis stage_blocks=1,1,3,2|3,3,2,3 --axis stem_filters=16,12"""
+
+from __future__ import annotations
+
+from .cli import parser, run_search
+from .space import candidates, parse_axis
+
+
+def main(argv=None) -> int:
+    p = parser("python -m search.grid", __doc__)
+    p.add_argument("--axis", action="append", required=True, metavar="FIELD=V1,V2",
+                   help="repeatable; tuple fields take A|B with comma-separated tuples")
+    args = p.parse_args(argv)
+
+    def build():
+        return candidates(args.base, [parse_axis(a, args.base) for a in args.axis])
+
+    name = "_".join(a.partition("=")[0] for a in args.axis)
+    return run_search(args, f"{args.base}_grid_{name}", build, f"{args.base}: grid over {', '.join(args.axis)}", None)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,47 @@
+"""How much each trial trains and where it is measured.
+
+`quick` ranks candidates on a 2-core CPU: a 32 m x 32 m grid in front of the sensor (64 x 64
+cells), 150 steps of batch 4 and 60 validation frames. `paper` trains on the whole grid with the
+paper's schedule. Sizes and latency are always profiled on the model's own (full) grid, so the
+cost columns are comparable with the paper whatever the recipe.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from dsfec_jax.grid import DSFEC_GRID, Grid
+from dsfec_jax.train.schedules import Schedule, get_schedule
+
+
+@dataclasses.dataclass(frozen=True)
+class Recipe:
+    name: str
+    schedule: Schedule
+    train_frames: int
+    val_frames: int
+    grid: Grid | None          # None: the model's own grid
+    max_pillars: int
+    window: int | None         # training windows (cells); None: the whole (recipe) grid
+    latency_repeats: int
+
+    def model_overrides(self) -> dict:
+        out = {"max_pillars": self.max_pillars}
+        if self.grid is not None:
+            out["grid"] = self.grid
+        return out
+
+
+NEAR_GRID = Grid((0.0, 32.0), (-16.0, 16.0), DSFEC_GRID.z_range, DSFEC_GRID.cell)
+
+RECIPES = {
+    "quick": Recipe("quick", get_schedule("quick", steps=150, batch_size=4, warmup_steps=15), 400, 60,
+                    NEAR_GRID, 512, None, 5),
+    "paper": Recipe("paper", get_schedule("paper"), 4800, 500, None, 2048, None, 20),
+}
+
+
+def get_recipe(name: str) -> Recipe:
+    if name not in RECIPES:
+        raise ValueError(f"unknown profile {name!r}; valid: {sorted(RECIPES)}")
+    return RECIPES[name]

@@ -1,0 +1,148 @@
+"""Ablation reports from a journal: Markdown and CSV tables laid out like the DSFEC paper's
+(each cell of the non-base rows carries its change against the base row, e.g. "1027 (-109)"),
+the JSON records, and PNG plots of mAP against GFLOPs and latency with the Pareto front.
+
+    python -m search.report RUN_DIR
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import statistics
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+from dsfec_jax import atomic
+
+from .journal import Journal
+
+COLUMNS = (("car_mAP", "Car mAP", 2), ("car_AP4", "Car AP@4", 2), ("mAP", "mAP (4 classes)", 2),
+           ("gflops", "GFLOPs", 2), ("params", "Params (M)", 3), ("memory_mb", "Memory (MB)", 2),
+           ("latency_ms", "Latency (ms)", 1))
+
+
+def rows(records: list[dict]) -> list[dict]:
+    """One row per candidate (label), seeds aggregated to mean and spread; failed trials listed."""
+    groups = defaultdict(list)
+    for r in records:
+        groups[r["label"]].append(r)
+    out = []
+    for label, recs in groups.items():
+        ok = [r for r in recs if r["status"] == "ok"]
+        row = {"label": label, "seeds": len(recs), "failed": len(recs) - len(ok),
+               "errors": [r["error"] for r in recs if r["status"] != "ok"]}
+        for key, _, _ in COLUMNS:
+            vals = [_value(r, key) for r in ok]
+            vals = [v for v in vals if v is not None]
+            row[key] = statistics.fmean(vals) if vals else None
+            row[key + "_sd"] = statistics.stdev(vals) if len(vals) > 1 else 0.0
+        out.append(row)
+    return out
+
+
+def _value(record: dict, key: str):
+    if key in record.get("metrics", {}):
+        return record["metrics"][key]
+    v = record.get("costs", {}).get(key)
+    return v / 1e6 if key == "params" and v is not None else v
+
+
+def _cell(row, base, key, digits) -> str:
+    v = row[key]
+    if v is None:
+        return "failed" if row["failed"] else "-"
+    text = f"{v:.{digits}f}" + (f" ± {row[key + '_sd']:.{digits}f}" if row["seeds"] > 1 else "")
+    if base is not None and row is not base and base[key] is not None:
+        text += f" ({v - base[key]:+.{digits}f})"
+    return text
+
+
+def markdown(table: list[dict], base_label: str | None, title: str) -> str:
+    base = next((r for r in table if r["label"] == base_label), None)
+    head = ["candidate"] + [name for _, name, _ in COLUMNS]
+    lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in table:
+        mark = " (base)" if r is base else ""
+        lines.append("| " + " | ".join([r["label"] + mark] + [_cell(r, base, k, d) for k, _, d in COLUMNS]) + " |")
+    for r in table:
+        for err in r["errors"]:
+            lines.append(f"\nFailed: {r['label']}: {err}")
+    return "\n".join(lines) + "\n"
+
+
+def csv_text(table: list[dict]) -> str:
+    buf = io.StringIO()
+    keys = ["label", "seeds", "failed"] + [k for key, _, _ in COLUMNS for k in (key, key + "_sd")]
+    writer = csv.DictWriter(buf, keys, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(table)
+    return buf.getvalue()
+
+
+def pareto(points: list[tuple[float, float]]) -> list[int]:
+    """Indices of points no other point beats on both lower cost and higher score."""
+    return [i for i, (c, s) in enumerate(points)
+            if not any((c2 <= c and s2 >= s) and (c2 < c or s2 > s) for c2, s2 in points)]
+
+
+def plot(table: list[dict], cost: str, path: Path, title: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts = [(r[cost], r["car_mAP"], r["label"]) for r in table if r[cost] is not None and r["car_mAP"] is not None]
+    fig, ax = plt.subplots(figsize=(6, 4.2), dpi=120)
+    if pts:
+        front = set(pareto([(c, s) for c, s, _ in pts]))
+        for i, (c, s, label) in enumerate(pts):
+            ax.scatter(c, s, color="tab:red" if i in front else "tab:blue", zorder=3)
+            ax.annotate(label, (c, s), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        fr = sorted((pts[i][0], pts[i][1]) for i in front)
+        ax.plot([c for c, _ in fr], [s for _, s in fr], color="tab:red", lw=1, label="Pareto front")
+        ax.legend(fontsize=8)
+    ax.set_xlabel({"gflops": "GFLOPs (2 x MAC, batch 1)", "latency_ms": "latency (ms, batch 1, CPU)"}[cost])
+    ax.set_ylabel("Car mAP (%)")
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    atomic.write_bytes(path, buf.getvalue())
+
+
+def write_reports(run_dir: str | Path) -> dict:
+    """Regenerate every report of RUN_DIR from its journal (and search.json, if present)."""
+    run_dir = Path(run_dir)
+    records = Journal(run_dir).records()
+    if not records:
+        raise ValueError(f"{run_dir}: no journal records to report")
+    meta_path = run_dir / "search.json"
+    meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
+    table = rows(records)
+    title = meta.get("title", "ablation")
+    atomic.write_text(run_dir / "report.md", markdown(table, meta.get("base_label"), title)
+                      + (f"\nCommand: `{meta['command']}`\n" if meta.get("command") else ""))
+    atomic.write_text(run_dir / "report.csv", csv_text(table))
+    atomic.write_json(run_dir / "records.json", records)
+    plot(table, "gflops", run_dir / "map_vs_gflops.png", title)
+    plot(table, "latency_ms", run_dir / "map_vs_latency.png", title)
+    return {"rows": table, "files": ["report.md", "report.csv", "records.json", "map_vs_gflops.png",
+                                     "map_vs_latency.png"]}
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 1:
+        sys.exit("usage: python -m search.report RUN_DIR")
+    out = write_reports(argv[0])
+    print((Path(argv[0]) / "report.md").read_text())
+    print("wrote " + ", ".join(out["files"]))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,57 @@
+"""One trial: config -> zoo.create -> train -> evaluate -> profile -> record (never raises)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+import traceback
+from pathlib import Path
+
+from dsfec_jax import zoo
+from dsfec_jax.data.sources import load_frames
+from dsfec_jax.profile.environment import environment
+from dsfec_jax.profile.records import profile
+from dsfec_jax.train.fit import fit, jsonable
+
+from .recipes import get_recipe
+
+
+def trial_key(spec: dict) -> str:
+    """Stable identity of a trial (base, overrides, recipe, data, seed)."""
+    ident = {k: spec[k] for k in ("base", "overrides", "recipe", "data", "seed")}
+    return hashlib.sha1(json.dumps(jsonable(ident), sort_keys=True).encode()).hexdigest()[:12]
+
+
+def make_trial(base: str, candidate: dict, recipe: str, data: str, seed: int) -> dict:
+    spec = {"base": base, "label": candidate["label"], "overrides": candidate["overrides"], "recipe": recipe,
+            "data": data, "seed": seed}
+    return {**spec, "key": trial_key(spec)}
+
+
+def run_trial(trial: dict, run_dir: str | Path) -> dict:
+    """Train and measure one candidate; a failure (NaN loss, OOM, ...) becomes a 'failed' record."""
+    t0 = time.perf_counter()
+    record = {k: jsonable(v) for k, v in trial.items()}
+    try:
+        record.update(measure(trial, Path(run_dir) / "trials" / trial["key"]))
+        record["status"] = "ok"
+    except Exception as err:  # a trial must never stop the sweep
+        record.update(status="failed", error=f"{type(err).__name__}: {err}",
+                      traceback=traceback.format_exc(limit=4)[-2000:])
+    record["wall_s"] = round(time.perf_counter() - t0, 1)
+    record["environment"] = environment()
+    return record
+
+
+def measure(trial: dict, trial_dir: Path) -> dict:
+    recipe = get_recipe(trial["recipe"])
+    overrides = {**trial["overrides"], **recipe.model_overrides()}
+    frames = load_frames(trial["data"], "train", recipe.train_frames, seed=0)
+    val = load_frames(trial["data"], "val", recipe.val_frames, seed=0)
+    _, _, scores = fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
+                       window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False)
+    costs = profile([zoo.create(trial["base"], **trial["overrides"])], timing=True,
+                    repeats=recipe.latency_repeats, warmup=1)[0]
+    return {"metrics": scores,
+            "costs": {k: costs[k] for k in ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")}}

@@ -1,0 +1,120 @@
+import json
+
+import pytest
+
+from dsfec_jax import zoo
+from dsfec_jax.grid import Grid
+from search import blocks, grid, recipes, report, runners, stem, trial
+from search.activations import activation_candidates
+from search.journal import Journal
+from search.space import SearchSpaceError, candidates, parse_axis
+from dsfec_jax.train.schedules import get_schedule
+from conftest import tiny
+
+
+@pytest.fixture
+def tiny_search(monkeypatch):
+    """A tiny registered base and a tiny recipe, so a sweep trains in seconds."""
+    monkeypatch.setitem(zoo.REGISTRY, "tiny_l", tiny("dsfec_l", name="tiny_l", stage_blocks=(1, 2, 1, 1)).config)
+    tiny_recipe = recipes.Recipe("quick", get_schedule("quick", steps=2, batch_size=2, warmup_steps=1), 4, 2,
+                                 Grid((0.0, 8.0), (-4.0, 4.0), (-2.5, 2.5), 0.5), 64, None, 1)
+    monkeypatch.setitem(recipes.RECIPES, "quick", tiny_recipe)
+    return "tiny_l"
+
+
+def test_axes_expand_and_validate_before_training():
+    axis = parse_axis("stage2_blocks=1,3", "dsfec_l")
+    assert [c["overrides"]["stage_blocks"] for c in candidates("dsfec_l", [axis])] == [(3, 1, 6, 3), (3, 3, 6, 3)]
+    tied = candidates("dsfec_l", [parse_axis("stem_filters=16", "dsfec_l")])[0]["overrides"]
+    assert tied == {"stem_filters": 16, "fec_filters": (32, 128, 16)}
+    tuples = parse_axis("stage_blocks=1,1,3,2|3,3,2,3", "dsfec_s")
+    assert tuples.values == ((1, 1, 3, 2), (3, 3, 2, 3))
+    with pytest.raises(SearchSpaceError, match="unknown field 'stem_filterz'"):
+        parse_axis("stem_filterz=3", "dsfec_l")
+    with pytest.raises(SearchSpaceError, match="stage_blocks"):
+        candidates("dsfec_l", [parse_axis("stage2_blocks=0,3", "dsfec_l")])
+    with pytest.raises(SearchSpaceError, match="f1 >= f3"):
+        candidates("dsfec_l", [parse_axis("stem_filters=64", "dsfec_l")])
+
+
+def test_invalid_axis_fails_before_any_training(tmp_path, monkeypatch):
+    monkeypatch.setattr(trial, "measure", lambda *a: pytest.fail("trained an invalid search"))
+    with pytest.raises(SystemExit, match="stage_blocks"):
+        blocks.main(["--stage", "2", "--values", "0,3", "--out", str(tmp_path / "bad")])
+    with pytest.raises(SystemExit, match="unknown field"):
+        grid.main(["--axis", "nope=1,2", "--out", str(tmp_path / "bad2")])
+    assert not (tmp_path / "bad" / "journal.jsonl").exists()
+
+
+def test_activation_candidates_one_component_at_a_time():
+    cands = activation_candidates("dsfec_m", ("relu", "mish"))
+    labels = [c["label"] for c in cands]
+    assert labels[0] == "paper mix" and "fec=relu" not in labels and "fec=mish" in labels
+    assert {"act_car_head": "relu", "act_truck_head": "relu"} in [c["overrides"] for c in cands]
+
+
+def test_real_sweep_trains_measures_and_reports(tiny_search, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--out", str(out)]) == 0
+    records = Journal(out).records()
+    assert [r["status"] for r in records] == ["ok", "ok"], [r.get("error") for r in records]
+    g = [r["costs"]["gflops"] for r in records]
+    p = [r["costs"]["params"] for r in records]
+    assert g[0] < g[1] and p[0] < p[1]  # more blocks cost more
+    assert all(0 <= r["metrics"]["car_mAP"] <= 100 and r["costs"]["latency_ms"] > 0 for r in records)
+    assert records[0]["environment"]["versions"]["jax"] and records[0]["wall_s"] > 0
+    for f in ("report.md", "report.csv", "records.json", "map_vs_gflops.png", "map_vs_latency.png"):
+        assert (out / f).exists(), f
+    md = (out / "report.md").read_text()
+    assert "stage2_blocks=2 (base)" in md and "(-" in md  # the other row shows its change against the base
+    assert (out / "map_vs_gflops.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert json.loads((out / "search.json").read_text())["command"].startswith("python -m search.blocks")
+
+
+def fake_measure(calls, fail_label=None):
+    def measure(t, trial_dir):
+        calls.append(t["label"])
+        if t["label"] == fail_label:
+            raise FloatingPointError("loss is nan at step 3")
+        n = t["overrides"].get("stem_filters", 1)
+        return {"metrics": {"car_mAP": 10.0 + n, "car_AP4": 20.0, "mAP": 5.0},
+                "costs": {"params": 1000 * n, "gflops": 0.1 * n, "memory_mb": 1.0, "latency_ms": 2.0 * n,
+                          "latency_p90_ms": 2.5 * n}}
+    return measure
+
+
+def test_kill_and_resume_skips_finished_trials(tmp_path, monkeypatch):
+    calls = []
+    monkeypatch.setattr(trial, "measure", fake_measure(calls))
+    out = tmp_path / "run"
+    real_append = Journal.append
+
+    def killed_after_two(self, record):
+        real_append(self, record)
+        if len(self.records()) == 2:
+            raise KeyboardInterrupt  # the sweep is killed between trials
+    monkeypatch.setattr(Journal, "append", killed_after_two)
+    with pytest.raises(KeyboardInterrupt):
+        stem.main(["--values", "32,16,12,8", "--out", str(out)])
+    assert len(Journal(out).records()) == 2
+    monkeypatch.setattr(Journal, "append", real_append)
+    assert stem.main(["--values", "32,16,12,8", "--out", str(out)]) == 0
+    assert calls == ["stem_filters=32", "stem_filters=16", "stem_filters=12", "stem_filters=8"]
+    assert len(Journal(out).records()) == 4
+
+
+def test_a_failed_trial_is_recorded_and_the_sweep_goes_on(tmp_path, monkeypatch):
+    calls = []
+    monkeypatch.setattr(trial, "measure", fake_measure(calls, fail_label="stem_filters=16"))
+    out = tmp_path / "run"
+    assert stem.main(["--values", "32,16,12", "--seeds", "2", "--out", str(out)]) == 0
+    records = Journal(out).records()
+    assert [r["status"] for r in records].count("failed") == 2 and len(records) == 6
+    failed = [r for r in records if r["status"] == "failed"][0]
+    assert "FloatingPointError: loss is nan" in failed["error"]
+    md = (out / "report.md").read_text()
+    assert "Failed: stem_filters=16" in md and "± 0.00" in md
+
+
+def test_pareto_front():
+    assert report.pareto([(1, 10), (2, 12), (3, 11), (2, 9)]) == [0, 1]
