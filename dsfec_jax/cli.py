@@ -55,6 +55,12 @@ def parse(argv=None) -> argparse.Namespace:
     t.add_argument("--no-augment", action="store_true")
     t.add_argument("--window", type=int, default=96,
                    help="train on overlapping WxW-cell windows of the grid (0 = the whole grid)")
+    sh = sub.add_parser("ship", help="package a trained run's weights into dsfec_jax/weights with a manifest")
+    sh.add_argument("--model", required=True)
+    sh.add_argument("--run-dir", required=True)
+    sh.add_argument("--checkpoint", default="best", choices=("best", "last"))
+    sh.add_argument("--frames", type=int, default=200, help="synthetic val and test frames to measure")
+    sh.add_argument("--out-dir", default=None, help="default: the package's weights directory")
     for name, split in (("eval", "test"), ("predict", "test")):
         q = sub.add_parser(name, help=f"{name} a zoo model")
         common(q, split)
@@ -128,10 +134,43 @@ def write_predictions(args, frames, detections, predictor) -> None:
                          predicted=detections[f.frame_id].boxes)
 
 
+def run_ship(args) -> int:
+    from . import checkpoint, zoo
+    from .data.sources import load_frames
+    from .evaluate import evaluate
+    from .predict import Predictor
+    from .profile.environment import versions
+    from .train.loop import checkpoints
+
+    run = Path(args.run_dir)
+    source = run / "checkpoints" / "best.msgpack" if args.checkpoint == "best" else checkpoints(run)[-1]
+    info = json.loads((run / "run.json").read_text())
+    det = zoo.create(args.model, max_pillars=RUN_PILLARS)
+    variables = zoo.load_variables(det, source)
+    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    predictor = Predictor(det, variables, score_threshold=0.05)
+    measured = {}
+    for split in ("val", "test"):
+        result = evaluate(predictor, load_frames("synthetic", split, args.frames, 0))
+        measured[split] = {k: result[k] for k in ("car_mAP", "car_AP4", "mAP")} | {
+            "class_mAP": result["metrics"]["class_mAP"], "AP@4": result["metrics"]["AP@4"],
+            "frames": args.frames, "data_seed": 0}
+    manifest = {"model": args.model, "source_checkpoint": str(source),
+                "step": checkpoint.read_manifest(source).get("step"), "training": info,
+                "measured": measured, "ship_command": "dsfec " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+                "versions": versions()}
+    out = Path(args.out_dir) / f"{args.model}.msgpack" if args.out_dir else zoo.shipped_weights(args.model)
+    checkpoint.save(out, variables, manifest)
+    print(json.dumps({"weights": str(out), "measured": measured}, indent=2))
+    return 0
+
+
 def main(argv=None) -> int:
     args = parse(argv)
     if args.command == "train":
         return run_train(args)
+    if args.command == "ship":
+        return run_ship(args)
     return run_eval_or_predict(args)
 
 

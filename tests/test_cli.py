@@ -1,5 +1,6 @@
 import json
 
+import numpy as np
 import pytest
 
 from dsfec_jax import cli, zoo
@@ -19,7 +20,7 @@ def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
                      "--val-frames", "2", "--eval-every", "3", "--run-dir", str(run), "--max-pillars", "96",
                      "--window", "16"]) == 0
     final = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert set(final["final"]) == {"car_mAP", "car_AP4", "mAP"}
+    assert set(final["final"]) == {"car_mAP", "car_AP4", "mAP", "class_mAP", "AP@4"}
     info = json.loads((run / "run.json").read_text())
     assert info["seed"] == 0 and info["config"]["name"] == "tiny_s" and info["versions"]["jax"]
     assert len(info["windows"]) == 4  # 16x16-cell windows of the 32x32 grid
@@ -43,6 +44,16 @@ def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
         assert offline["AP"][name] == pytest.approx(in_process["AP"][name])
     assert offline["num_gt"] == in_process["num_gt"] and offline["num_pred"] == in_process["num_pred"]
     assert sum(in_process["num_gt"].values()) > 0
+
+    shipped = tmp_path / "weights"
+    assert cli.main(["ship", "--model", tiny_model, "--run-dir", str(run), "--checkpoint", "last", "--frames", "2",
+                     "--out-dir", str(shipped)]) == 0
+    capsys.readouterr()
+    manifest = json.loads((shipped / "tiny_s.msgpack.json").read_text())
+    assert manifest["step"] == 3 and manifest["training"]["seed"] == 0 and "car_mAP" in manifest["measured"]["test"]
+    detections = zoo.load(tiny_model, weights=shipped / "tiny_s.msgpack", max_pillars=96)(
+        np.zeros((5, 7), np.float32))
+    assert len(detections.boxes) == len(detections.scores)
 
 
 def test_load_without_shipped_weights_says_how_to_get_them(tiny_model):
