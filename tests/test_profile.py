@@ -75,7 +75,7 @@ def test_cli_json_and_readme(tmp_path, capsys):
     assert {"model", "params", "gflops", "memory_mb", "latency_ms"} <= set(records[0])
     assert records[0]["model"] == "dsfec_s" and records[0]["params"] == 296_942
     text = readme.read_text()
-    assert "old" not in text and "| dsfec_s | 0.297 M |" in text and text.endswith("rest\n")
+    assert "old" not in text and "| dsfec_s | " in text and "| 0.297 M |" in text and text.endswith("rest\n")
     assert json.loads(out.read_text())["command"].startswith("python -m dsfec_jax.profile")
 
 
