@@ -118,3 +118,17 @@ def test_a_failed_trial_is_recorded_and_the_sweep_goes_on(tmp_path, monkeypatch)
 
 def test_pareto_front():
     assert report.pareto([(1, 10), (2, 12), (3, 11), (2, 9)]) == [0, 1]
+
+
+def test_experiment_tables_print_the_paper_beside_ours(tmp_path, monkeypatch, capsys):
+    from experiments import table1, table2, table3
+
+    monkeypatch.setattr(trial, "measure", fake_measure([]))
+    assert table2.main(["--out", str(tmp_path / "t2")]) == 0
+    out = capsys.readouterr().out
+    assert "| 12 | 22.00 (26.5) |" in out and "(4.32)" in out
+    assert table3.main(["--out", str(tmp_path / "t3")]) == 0
+    out = capsys.readouterr().out
+    assert "| 3 | 11.00 (26.17) |" in out and "1027" in out
+    assert table1.main([]) == 0
+    assert "| dsfec_s |" in capsys.readouterr().out

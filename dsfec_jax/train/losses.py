@@ -15,7 +15,7 @@ class LossConfig:
     focal_gamma: float = 2.0
     smooth_l1_beta: float = 1.0 / 9.0
     cls_weight: float = 1.0
-    box_weight: float = 2.0
+    box_weight: float = 0.25  # PIXOR re-implementations weight the box term 0.1 (on normalised codes); 2.0 let it swamp the classifier
     head_weights: tuple[tuple[str, float], ...] = (("car", 1.0), ("truck", 1.0), ("vru", 1.0))
 
 

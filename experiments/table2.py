@@ -1,0 +1,24 @@
+"""DSFEC Table 2 (stem filters 32/16/12/8, FEC f3 tied): python -m experiments.table2 [--profile quick|paper]"""
+
+from __future__ import annotations
+
+from dsfec_jax.profile import paper
+from search import stem
+
+from .common import fmt, run_table
+
+
+def row(r: dict) -> list[str]:
+    f = int(r["label"].split("=")[1])
+    ref = paper.TABLE2[f]
+    return [str(f), f"{fmt(r['car_mAP'])} ({ref['mAP']})", f"{fmt(r['gflops'])} / {ref['gflops']}",
+            f"{fmt(r['memory_mb'])} ({ref['memory_mb']})"]
+
+
+def main(argv=None) -> int:
+    header = ["stem filters", "Car mAP ours (paper)", "GFLOPs: model ours / stem paper", "memory MB ours (paper)"]
+    return run_table(stem.main, ["--values", "32,16,12,8"], "runs/experiments/table2", header, row, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

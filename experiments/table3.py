@@ -1,0 +1,24 @@
+"""DSFEC Table 3 (stage-2 blocks of DSFEC-L, 6 vs 3): python -m experiments.table3 [--profile quick|paper]"""
+
+from __future__ import annotations
+
+from dsfec_jax.profile import paper
+from search import blocks
+
+from .common import fmt, run_table
+
+
+def row(r: dict) -> list[str]:
+    n = int(r["label"].split("=")[1])
+    ref = paper.TABLE3[n]
+    return [str(n), f"{fmt(r['car_mAP'])} ({ref['mAP']})", f"{fmt(r['gflops'])} ({ref['gflops']})",
+            fmt(r["latency_ms"], 1), str(ref["raspi_ms"])]
+
+
+def main(argv=None) -> int:
+    header = ["stage-2 blocks", "Car mAP ours (paper)", "GFLOPs ours (paper)", "latency ms ours, CPU", "RasPi ms (paper)"]
+    return run_table(blocks.main, ["--stage", "2", "--values", "6,3"], "runs/experiments/table3", header, row, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
