@@ -11,7 +11,7 @@ from dsfec_jax import atomic
 
 from .recipes import RECIPES
 from .report import write_reports
-from .runners import run_local
+from .runners import run_local, run_ray
 from .space import SearchSpaceError
 from .trial import make_trial
 
@@ -23,6 +23,8 @@ def parser(prog: str, doc: str, base: str = "dsfec_l") -> argparse.ArgumentParse
     p.add_argument("--data", default="synthetic", help="synthetic | vod:PATH | tj4d:PATH | nuscenes:DATAROOT")
     p.add_argument("--out", default=None, help="RUN_DIR (default runs/search/<name>); re-running resumes it")
     p.add_argument("--seeds", type=int, default=1, help="repeat each candidate with this many seeds")
+    p.add_argument("--backend", default="local", choices=("local", "ray"), help="run trials here or as Ray Tune trials")
+    p.add_argument("--address", default=None, help="with --backend ray: an existing cluster (default: start a local Ray)")
     p.set_defaults(prog=prog)
     return p
 
@@ -39,7 +41,10 @@ def run_search(args, name: str, candidates_fn, title: str, base_label: str | Non
                                                 "profile": args.profile, "data": args.data, "seeds": args.seeds,
                                                 "command": command, "candidates": [c["label"] for c in candidates]})
     trials = [make_trial(args.base, c, args.profile, args.data, seed) for c in candidates for seed in range(args.seeds)]
-    run_local(trials, run_dir)
+    if args.backend == "ray":
+        run_ray(trials, run_dir, args.address)
+    else:
+        run_local(trials, run_dir)
     out = write_reports(run_dir)
     print((run_dir / "report.md").read_text())
     print(f"reports in {run_dir}: " + ", ".join(out["files"]))

@@ -28,3 +28,55 @@ def run_local(trials: list[dict], run_dir: str | Path, log: Callable[[str], None
                                              f"{record['costs']['gflops']:.2f}" if record["status"] == "ok"
                                              else record["error"]))
     return journal.records()
+
+
+def run_ray(trials: list[dict], run_dir: str | Path, address: str | None = None, cpus_per_trial: float = 1.0,
+            log: Callable[[str], None] = print) -> list[dict]:
+    """Run the pending trials as Ray Tune trials (a local Ray started here, or the cluster at
+    `address`); each finished trial's record is appended to the journal as it arrives."""
+    import json
+    import os
+
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    os.environ.setdefault("RAY_AUTH_MODE", "disabled")
+    try:
+        import ray
+        from ray import tune
+    except ImportError as err:
+        raise SystemExit("--backend ray needs Ray Tune: pip install 'dsfec_jax[ray]'") from err
+
+    run_dir = Path(run_dir).resolve()
+    journal = Journal(run_dir)
+    todo = pending(trials, journal)
+    log(f"{len(trials) - len(todo)} of {len(trials)} trials already in {journal.path}; running {len(todo)} on Ray")
+    if not todo:
+        return journal.records()
+
+    class JournalCallback(tune.Callback):
+        def on_trial_result(self, iteration, trials, trial, result, **info):
+            if "record_json" in result:
+                record = json.loads(result["record_json"])
+                journal.append(record)
+                log(f"    {record['label']} (seed {record['seed']}): {record['status']}")
+
+    started = not ray.is_initialized()
+    if started:
+        ray.init(address=address, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True,
+                 **({} if address else {"num_cpus": os.cpu_count()}))
+    try:
+        trainable = tune.with_resources(_ray_trainable, {"cpu": cpus_per_trial})
+        tuner = tune.Tuner(trainable,
+                           param_space={"trial": tune.grid_search(todo), "run_dir": str(run_dir)},
+                           run_config=tune.RunConfig(name="search", storage_path=str(run_dir / "ray"),
+                                                     callbacks=[JournalCallback()], verbose=0))
+        tuner.fit()
+    finally:
+        if started:
+            ray.shutdown()
+    return journal.records()
+
+
+def _ray_trainable(config: dict) -> dict:
+    import json
+
+    return {"record_json": json.dumps(run_trial(config["trial"], config["run_dir"]))}

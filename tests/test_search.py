@@ -132,3 +132,13 @@ def test_experiment_tables_print_the_paper_beside_ours(tmp_path, monkeypatch, ca
     assert "| 3 | 11.00 (26.17) |" in out and "1027" in out
     assert table1.main([]) == 0
     assert "| dsfec_s |" in capsys.readouterr().out
+
+
+def test_ray_backend_runs_a_two_trial_sweep(tmp_path):
+    out = tmp_path / "ray_run"
+    assert blocks.main(["--stage", "4", "--values", "1,2", "--base", "dsfec_s", "--profile", "smoke",
+                        "--backend", "ray", "--out", str(out)]) == 0
+    records = Journal(out).records()
+    assert sorted(r["label"] for r in records) == ["stage4_blocks=1", "stage4_blocks=2"]
+    assert all(r["status"] == "ok" for r in records), [r.get("error") for r in records]
+    assert (out / "report.md").exists()
