@@ -4,7 +4,7 @@ import pytest
 
 from dsfec_jax import zoo
 from dsfec_jax.grid import Grid
-from search import blocks, grid, recipes, report, runners, stem, trial
+from search import blocks, grid, recipes, report, stem, trial
 from search.activations import activation_candidates
 from search.journal import Journal
 from search.space import SearchSpaceError, candidates, parse_axis
