@@ -11,6 +11,7 @@ from dsfec_jax import atomic
 
 from .recipes import RECIPES
 from .report import write_reports
+from .oneshot import run_oneshot, supernet_overrides
 from .runners import run_local, run_ray
 from .space import SearchSpaceError
 from .trial import make_trial
@@ -23,6 +24,8 @@ def parser(prog: str, doc: str, base: str = "dsfec_l") -> argparse.ArgumentParse
     p.add_argument("--data", default="synthetic", help="synthetic | vod:PATH | tj4d:PATH | nuscenes:DATAROOT")
     p.add_argument("--out", default=None, help="RUN_DIR (default runs/search/<name>); re-running resumes it")
     p.add_argument("--seeds", type=int, default=1, help="repeat each candidate with this many seeds")
+    p.add_argument("--strategy", default="train", choices=("train", "oneshot"),
+                   help="train every candidate, or one weight-sharing supernet over a depth axis")
     p.add_argument("--backend", default="local", choices=("local", "ray"), help="run trials here or as Ray Tune trials")
     p.add_argument("--address", default=None, help="with --backend ray: an existing cluster (default: start a local Ray)")
     p.set_defaults(prog=prog)
@@ -40,8 +43,16 @@ def run_search(args, name: str, candidates_fn, title: str, base_label: str | Non
     atomic.write_json(run_dir / "search.json", {"title": title, "base": args.base, "base_label": base_label,
                                                 "profile": args.profile, "data": args.data, "seeds": args.seeds,
                                                 "command": command, "candidates": [c["label"] for c in candidates]})
-    trials = [make_trial(args.base, c, args.profile, args.data, seed) for c in candidates for seed in range(args.seeds)]
-    if args.backend == "ray":
+    trials = [make_trial(args.base, c, args.profile, args.data, seed, args.strategy)
+              for c in candidates for seed in range(args.seeds)]
+    if args.strategy == "oneshot":
+        try:
+            supernet_overrides(candidates)
+        except SearchSpaceError as err:
+            sys.exit(str(err))
+        for seed in range(args.seeds):
+            run_oneshot(args.base, [t for t in trials if t["seed"] == seed], run_dir)
+    elif args.backend == "ray":
         run_ray(trials, run_dir, args.address)
     else:
         run_local(trials, run_dir)

@@ -20,12 +20,14 @@ from .recipes import get_recipe
 def trial_key(spec: dict) -> str:
     """Stable identity of a trial (base, overrides, recipe, data, seed)."""
     ident = {k: spec[k] for k in ("base", "overrides", "recipe", "data", "seed")}
+    if spec.get("strategy", "train") != "train":  # keeps the keys of earlier train-strategy journals
+        ident["strategy"] = spec["strategy"]
     return hashlib.sha1(json.dumps(jsonable(ident), sort_keys=True).encode()).hexdigest()[:12]
 
 
-def make_trial(base: str, candidate: dict, recipe: str, data: str, seed: int) -> dict:
+def make_trial(base: str, candidate: dict, recipe: str, data: str, seed: int, strategy: str = "train") -> dict:
     spec = {"base": base, "label": candidate["label"], "overrides": candidate["overrides"], "recipe": recipe,
-            "data": data, "seed": seed}
+            "data": data, "seed": seed, "strategy": strategy}
     return {**spec, "key": trial_key(spec)}
 
 

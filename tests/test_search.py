@@ -142,3 +142,40 @@ def test_ray_backend_runs_a_two_trial_sweep(tmp_path):
     assert sorted(r["label"] for r in records) == ["stage4_blocks=1", "stage4_blocks=2"]
     assert all(r["status"] == "ok" for r in records), [r.get("error") for r in records]
     assert (out / "report.md").exists()
+
+
+def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path, monkeypatch):
+    from search import oneshot
+
+    out = tmp_path / "oneshot"
+    assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "oneshot",
+                        "--out", str(out)]) == 0
+    records = Journal(out).records()
+    assert [r["status"] for r in records] == ["ok", "ok"], [r.get("error") for r in records]
+    assert {tuple(r["supernet"]["stage_blocks"]) for r in records} == {(1, 2, 1, 1)}
+    assert records[0]["costs"]["gflops"] < records[1]["costs"]["gflops"]
+    assert all(r["strategy"] == "oneshot" for r in records)
+    # subnets are prefixes of the supernet: their parameter entries are a subset of its entries
+    sub = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 1, 1, 1)))
+    sup = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 2, 1, 1)))
+    assert set(sub) < set(sup) and "stage2_block1" in set(sup) - set(sub)
+
+
+def test_oneshot_refuses_non_depth_axes():
+    from search.oneshot import supernet_overrides
+
+    with pytest.raises(SearchSpaceError, match="stage_blocks and nothing else"):
+        supernet_overrides([{"overrides": {"stem_filters": 8}}, {"overrides": {"stem_filters": 12}}])
+
+
+def test_kendall_tau_and_compare(tmp_path, monkeypatch):
+    from search.compare import compare, kendall_tau
+
+    assert kendall_tau([1, 2, 3, 4], [10, 20, 30, 40]) == 1.0
+    assert kendall_tau([1, 2, 3, 4], [4, 3, 2, 1]) == -1.0
+    assert kendall_tau([1, 2, 3], [1, 3, 2]) == pytest.approx(1 / 3)
+    monkeypatch.setattr(trial, "measure", fake_measure([]))
+    stem.main(["--values", "32,16,12", "--out", str(tmp_path / "a")])
+    stem.main(["--values", "32,16,12", "--out", str(tmp_path / "b"), "--seeds", "1"])
+    result = compare(str(tmp_path / "a"), str(tmp_path / "b"))
+    assert result["kendall_tau"] == 1.0 and len(result["candidates"]) == 3

@@ -1,0 +1,55 @@
+"""How well a cheap strategy ranks candidates against full training, and what it costs:
+python -m search.compare RUN_TRAIN RUN_ONESHOT  (Kendall tau of the Car-mAP rankings, cost ratio)."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from .journal import Journal
+from .report import rows
+
+
+def kendall_tau(a: list[float], b: list[float]) -> float:
+    """Tau-b over paired scores (ties counted as neither concordant nor discordant)."""
+    n, conc, disc, ties_a, ties_b = len(a), 0, 0, 0, 0
+    for i in range(n):
+        for j in range(i + 1, n):
+            da, db = a[i] - a[j], b[i] - b[j]
+            if da == 0 and db == 0:
+                continue
+            if da == 0:
+                ties_a += 1
+            elif db == 0:
+                ties_b += 1
+            elif (da > 0) == (db > 0):
+                conc += 1
+            else:
+                disc += 1
+    denom = ((conc + disc + ties_a) * (conc + disc + ties_b)) ** 0.5
+    return (conc - disc) / denom if denom else float("nan")
+
+
+def compare(run_a: str, run_b: str) -> dict:
+    ra = {r["label"]: r for r in rows(Journal(run_a).records())}
+    rb = {r["label"]: r for r in rows(Journal(run_b).records())}
+    labels = [lbl for lbl in ra if lbl in rb and ra[lbl]["car_mAP"] is not None and rb[lbl]["car_mAP"] is not None]
+    if len(labels) < 2:
+        raise ValueError(f"{run_a} and {run_b} share fewer than two finished candidates")
+    wall = lambda run: sum(r.get("wall_s", 0) for r in Journal(run).records())  # noqa: E731
+    return {"candidates": labels, "kendall_tau": kendall_tau([ra[x]["car_mAP"] for x in labels],
+                                                             [rb[x]["car_mAP"] for x in labels]),
+            "wall_s": {"a": wall(run_a), "b": wall(run_b)}, "cost_ratio_b_over_a": wall(run_b) / max(wall(run_a), 1e-9),
+            "car_mAP": {x: [ra[x]["car_mAP"], rb[x]["car_mAP"]] for x in labels}}
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 2:
+        sys.exit("usage: python -m search.compare RUN_A RUN_B")
+    print(json.dumps(compare(*argv), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
