@@ -27,6 +27,7 @@ def parser(prog: str, doc: str, base: str = "dsfec_l") -> argparse.ArgumentParse
     p.add_argument("--strategy", default="train", choices=("train", "oneshot"),
                    help="train every candidate, or one weight-sharing supernet over a depth axis")
     p.add_argument("--backend", default="local", choices=("local", "ray"), help="run trials here or as Ray Tune trials")
+    p.add_argument("--retry-failed", action="store_true", help="re-run trials journaled as failed")
     p.add_argument("--address", default=None, help="with --backend ray: an existing cluster (default: start a local Ray)")
     p.set_defaults(prog=prog)
     return p
@@ -51,11 +52,11 @@ def run_search(args, name: str, candidates_fn, title: str, base_label: str | Non
         except SearchSpaceError as err:
             sys.exit(str(err))
         for seed in range(args.seeds):
-            run_oneshot(args.base, [t for t in trials if t["seed"] == seed], run_dir)
+            run_oneshot(args.base, [t for t in trials if t["seed"] == seed], run_dir, args.retry_failed)
     elif args.backend == "ray":
-        run_ray(trials, run_dir, args.address)
+        run_ray(trials, run_dir, args.address, args.retry_failed)
     else:
-        run_local(trials, run_dir)
+        run_local(trials, run_dir, args.retry_failed)
     out = write_reports(run_dir)
     print((run_dir / "report.md").read_text())
     print(f"reports in {run_dir}: " + ", ".join(out["files"]))

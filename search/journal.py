@@ -28,8 +28,9 @@ class Journal:
                     raise ValueError(f"{self.path}:{n}: not a JSON record ({err})") from err
         return out
 
-    def done(self) -> set[str]:
-        return {r["key"] for r in self.records()}
+    def done(self, retry_failed: bool = False) -> set[str]:
+        """Keys with a record (with retry_failed, only those that succeeded)."""
+        return {r["key"] for r in self.records() if not retry_failed or r["status"] == "ok"}
 
     def append(self, record: dict) -> None:
         records = [r for r in self.records() if r["key"] != record["key"]] + [record]

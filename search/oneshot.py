@@ -4,7 +4,8 @@ weights it inherits.
 The supernet has the most blocks any candidate has in each stage; a candidate (subnet) uses the
 first k blocks of each stage, which in Flax means the subset of the supernet's top-level
 parameter entries whose names it shares (`stage2_block0..k-1`). Each step trains one subnet
-drawn uniformly from the candidates (seeded by the step); only its parameters move. Before a
+drawn uniformly from the candidates (each round of len(candidates) steps visits every
+candidate once, in a seeded random order); only its parameters move. Before a
 subnet is evaluated its batch-norm statistics are recalibrated on training batches, because the
 supernet's running statistics mix every subnet's activations.
 """
@@ -15,6 +16,7 @@ import time
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import optax
 
@@ -62,7 +64,7 @@ def subnet_step(sub, keys, tx, loss_cfg: LossConfig):
     def step(state, batch):
         grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
         (loss, stats), g = grad_fn(subset(state["params"], keys), subset(state["batch_stats"], keys), batch)
-        grads = {k: g[k] if k in g else jax.tree.map(np.zeros_like, v) for k, v in state["params"].items()}
+        grads = {k: g[k] if k in g else jax.tree.map(jnp.zeros_like, v) for k, v in state["params"].items()}
         updates, opt_state = tx.update(grads, state["opt_state"], state["params"])
         moved = optax.apply_updates(state["params"], updates)
         params = {k: moved[k] if k in keys else v for k, v in state["params"].items()}  # idle blocks stay put
@@ -87,25 +89,26 @@ def recalibrate(sub, params: dict, batch_stats: dict, batches: list[dict]) -> di
     return jax.tree.map(lambda *x: np.mean(np.stack(x), 0), *means)
 
 
-def run_oneshot(base: str, trials: list[dict], run_dir: str | Path, log=print) -> list[dict]:
+def run_oneshot(base: str, trials: list[dict], run_dir: str | Path, retry_failed: bool = False,
+                log=print) -> list[dict]:
     """Train the supernet for these trials (one seed, one recipe) and journal one record each;
     if the supernet fails, every pending candidate is journaled as failed with the error."""
     journal = Journal(run_dir)
-    todo = [t for t in trials if t["key"] not in journal.done()]
+    todo = [t for t in trials if t["key"] not in journal.done(retry_failed)]
     if not todo:
         log("all one-shot candidates already in the journal")
         return journal.records()
     try:
-        _train_and_rank(base, trials, journal, log)
+        _train_and_rank(base, trials, journal, {t["key"] for t in todo}, log)
     except Exception as err:  # the sweep goes on: the failure is a record, not a crash
         for t in trials:
-            if t["key"] not in journal.done():
+            if t["key"] not in journal.done(retry_failed=True):
                 journal.append({**t, "status": "failed", "error": f"{type(err).__name__}: {err}",
                                 "environment": environment()})
     return journal.records()
 
 
-def _train_and_rank(base: str, trials: list[dict], journal: Journal, log) -> None:
+def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[str], log) -> None:
     t0 = time.perf_counter()
     recipe, seed, data = get_recipe(trials[0]["recipe"]), trials[0]["seed"], trials[0]["data"]
     fixed = recipe.model_overrides()
@@ -121,7 +124,8 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, log) -> Non
     state = init_state(supernet, tx, jax.random.key(seed))
     fns = [subnet_step(s, set(k), tx, LossConfig()) for s, k in zip(subs, keys)]
     for step in range(steps):
-        i = int(np.random.default_rng([seed, 7, step]).integers(len(subs)))
+        round_, pos = divmod(step, len(subs))
+        i = int(np.random.default_rng([seed, 7, round_]).permutation(len(subs))[pos])
         batch = stream.batch(step)
         state, loss = fns[i](state, {"inputs": batch["inputs"], "targets": batch["targets"]})
         if not np.isfinite(float(loss)):
@@ -132,7 +136,7 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, log) -> Non
              for s in range(CALIBRATION_BATCHES)]
     val = load_frames(data, "val", recipe.val_frames, seed=0)
     for trial, sub, k in zip(trials, subs, keys):
-        if trial["key"] in journal.done():
+        if trial["key"] not in todo:
             continue
         t1 = time.perf_counter()
         params = subset(state["params"], k)

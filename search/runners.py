@@ -11,14 +11,15 @@ from .journal import Journal
 from .trial import run_trial
 
 
-def pending(trials: list[dict], journal: Journal) -> list[dict]:
-    done = journal.done()
+def pending(trials: list[dict], journal: Journal, retry_failed: bool = False) -> list[dict]:
+    done = journal.done(retry_failed)
     return [t for t in trials if t["key"] not in done]
 
 
-def run_local(trials: list[dict], run_dir: str | Path, log: Callable[[str], None] = print) -> list[dict]:
+def run_local(trials: list[dict], run_dir: str | Path, retry_failed: bool = False,
+              log: Callable[[str], None] = print) -> list[dict]:
     journal = Journal(run_dir)
-    todo = pending(trials, journal)
+    todo = pending(trials, journal, retry_failed)
     log(f"{len(trials) - len(todo)} of {len(trials)} trials already in {journal.path}; running {len(todo)}")
     for i, trial in enumerate(todo, 1):
         log(f"[{i}/{len(todo)}] {trial['label']} (seed {trial['seed']})")
@@ -30,8 +31,8 @@ def run_local(trials: list[dict], run_dir: str | Path, log: Callable[[str], None
     return journal.records()
 
 
-def run_ray(trials: list[dict], run_dir: str | Path, address: str | None = None, cpus_per_trial: float = 1.0,
-            log: Callable[[str], None] = print) -> list[dict]:
+def run_ray(trials: list[dict], run_dir: str | Path, address: str | None = None, retry_failed: bool = False,
+            cpus_per_trial: float = 1.0, log: Callable[[str], None] = print) -> list[dict]:
     """Run the pending trials as Ray Tune trials (a local Ray started here, or the cluster at
     `address`); each finished trial's record is appended to the journal as it arrives."""
     import json
@@ -47,7 +48,7 @@ def run_ray(trials: list[dict], run_dir: str | Path, address: str | None = None,
 
     run_dir = Path(run_dir).resolve()
     journal = Journal(run_dir)
-    todo = pending(trials, journal)
+    todo = pending(trials, journal, retry_failed)
     log(f"{len(trials) - len(todo)} of {len(trials)} trials already in {journal.path}; running {len(todo)} on Ray")
     if not todo:
         return journal.records()

@@ -114,6 +114,12 @@ def test_a_failed_trial_is_recorded_and_the_sweep_goes_on(tmp_path, monkeypatch)
     assert "FloatingPointError: loss is nan" in failed["error"]
     md = (out / "report.md").read_text()
     assert "Failed: stem_filters=16" in md and "± 0.00" in md
+    assert stem.main(["--values", "32,16,12", "--seeds", "2", "--out", str(out)]) == 0  # finished: nothing reruns
+    assert calls.count("stem_filters=16") == 2
+    monkeypatch.setattr(trial, "measure", fake_measure(calls))
+    assert stem.main(["--values", "32,16,12", "--seeds", "2", "--out", str(out), "--retry-failed"]) == 0
+    assert calls.count("stem_filters=16") == 4 and len(calls) == 8
+    assert all(r["status"] == "ok" for r in Journal(out).records())
 
 
 def test_pareto_front():
@@ -155,6 +161,7 @@ def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path
     assert {tuple(r["supernet"]["stage_blocks"]) for r in records} == {(1, 2, 1, 1)}
     assert records[0]["costs"]["gflops"] < records[1]["costs"]["gflops"]
     assert all(r["strategy"] == "oneshot" for r in records)
+    assert all(r["supernet"]["steps"] == 2 for r in records)  # one round: each subnet trained once
     # subnets are prefixes of the supernet: their parameter entries are a subset of its entries
     sub = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 1, 1, 1)))
     sup = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 2, 1, 1)))
