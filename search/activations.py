@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dsfec_jax import zoo
 
-from .cli import parser, run_search
+from .cli import parse, parser, run_search
 from .space import SearchSpaceError
 
 COMPONENTS = {"fec": ("act_fec",), "stem": ("act_stem",), "backbone": ("act_backbone",),
@@ -32,7 +32,7 @@ def activation_candidates(base: str, values: tuple[str, ...]) -> list[dict]:
 def main(argv=None) -> int:
     p = parser("python -m search.activations", __doc__, base="dsfec_m")
     p.add_argument("--values", default="relu,leaky_relu,swish,mish,hard_swish")
-    args = p.parse_args(argv)
+    args = parse(p, argv)
     values = tuple(args.values.split(","))
     return run_search(args, f"{args.base}_activations", lambda: activation_candidates(args.base, values),
                       f"{args.base}: activation per component", BASE_LABEL)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dsfec_jax import zoo
 
-from .cli import parser, run_search
+from .cli import parse, parser, run_search
 from .space import Axis, candidates
 
 
@@ -12,7 +12,7 @@ def main(argv=None) -> int:
     p = parser("python -m search.blocks", __doc__)
     p.add_argument("--stage", type=int, required=True, choices=(1, 2, 3, 4))
     p.add_argument("--values", default="1,2,3,4,5,6", help="block counts to try")
-    args = p.parse_args(argv)
+    args = parse(p, argv)
     values = tuple(int(v) for v in args.values.split(","))
     axis = Axis(f"stage{args.stage}_blocks", values)
     base_blocks = zoo.config(args.base).stage_blocks[args.stage - 1]

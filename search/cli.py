@@ -33,6 +33,13 @@ def parser(prog: str, doc: str, base: str = "dsfec_l") -> argparse.ArgumentParse
     return p
 
 
+def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
+    """Parse and keep the exact arguments, so search.json records the command that ran."""
+    args = p.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)
+    return args
+
+
 def run_search(args, name: str, candidates_fn, title: str, base_label: str | None) -> int:
     """Validate every candidate first, then run the missing trials and write the reports."""
     try:
@@ -40,7 +47,7 @@ def run_search(args, name: str, candidates_fn, title: str, base_label: str | Non
     except SearchSpaceError as err:
         sys.exit(str(err))
     run_dir = Path(args.out or Path("runs") / "search" / name)
-    command = f"{args.prog} " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    command = f"{args.prog} " + " ".join(shlex.quote(a) for a in args.argv)
     atomic.write_json(run_dir / "search.json", {"title": title, "base": args.base, "base_label": base_label,
                                                 "profile": args.profile, "data": args.data, "seeds": args.seeds,
                                                 "command": command, "candidates": [c["label"] for c in candidates]})

@@ -3,7 +3,7 @@ python -m search.grid --base dsfec_s --axis stage_blocks=1,1,3,2|3,3,2,3 --axis 
 
 from __future__ import annotations
 
-from .cli import parser, run_search
+from .cli import parse, parser, run_search
 from .space import candidates, parse_axis
 
 
@@ -11,7 +11,7 @@ def main(argv=None) -> int:
     p = parser("python -m search.grid", __doc__)
     p.add_argument("--axis", action="append", required=True, metavar="FIELD=V1,V2",
                    help="repeatable; tuple fields take A|B with comma-separated tuples")
-    args = p.parse_args(argv)
+    args = parse(p, argv)
 
     def build():
         return candidates(args.base, [parse_axis(a, args.base) for a in args.axis])

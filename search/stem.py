@@ -4,14 +4,14 @@ from __future__ import annotations
 
 from dsfec_jax import zoo
 
-from .cli import parser, run_search
+from .cli import parse, parser, run_search
 from .space import Axis, candidates
 
 
 def main(argv=None) -> int:
     p = parser("python -m search.stem", __doc__)
     p.add_argument("--values", default="32,16,12,8")
-    args = p.parse_args(argv)
+    args = parse(p, argv)
     axis = Axis("stem_filters", tuple(int(v) for v in args.values.split(",")))
     return run_search(args, f"{args.base}_stem_filters", lambda: candidates(args.base, [axis]),
                       f"{args.base}: stem filters (FEC f3 tied)", axis.label(zoo.config(args.base).stem_filters))

@@ -37,8 +37,3 @@ def make_train_step(detector, tx: optax.GradientTransformation, loss_cfg: LossCo
 
     return jax.jit(train_step, donate_argnums=0)
 
-
-def make_eval_fn(detector):
-    """Jitted inference on a batch of pillar inputs with a state's variables."""
-    return jax.jit(lambda state, inputs: detector.apply(
-        {"params": state["params"], "batch_stats": state["batch_stats"]}, inputs))
