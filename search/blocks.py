@@ -1,4 +1,9 @@
-"""Blocks per stage (DSFEC Table 3): python -m search.blocks --stage 2 [--values 1,2,3,4,5,6] [--base dsfec_l]"""
+"""Blocks per stage (DSFEC Table 3): python -m search.blocks --stage 2 [--values 1,2,3,4,5,6] [--base dsfec_l]
+
+A depth axis is what weight sharing fits, so the default strategy here is one-shot: one
+supernet trains for the recipe's budget and every candidate inherits its weights
+(`--strategy train` trains each candidate from scratch).
+"""
 
 from __future__ import annotations
 
@@ -9,7 +14,7 @@ from .space import Axis, candidates
 
 
 def main(argv=None) -> int:
-    p = parser("python -m search.blocks", __doc__)
+    p = parser("python -m search.blocks", __doc__, strategy="oneshot")
     p.add_argument("--stage", type=int, required=True, choices=(1, 2, 3, 4))
     p.add_argument("--values", default="1,2,3,4,5,6", help="block counts to try")
     args = parse(p, argv)

@@ -17,15 +17,15 @@ from .space import SearchSpaceError
 from .trial import make_trial
 
 
-def parser(prog: str, doc: str, base: str = "dsfec_l") -> argparse.ArgumentParser:
+def parser(prog: str, doc: str, base: str = "dsfec_l", strategy: str = "train") -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=doc.strip().splitlines()[0])
     p.add_argument("--base", default=base, help="registered model the candidates override")
     p.add_argument("--profile", default="quick", choices=sorted(RECIPES), help="training recipe per trial")
     p.add_argument("--data", default="synthetic", help="synthetic | vod:PATH | tj4d:PATH | nuscenes:DATAROOT")
     p.add_argument("--out", default=None, help="RUN_DIR (default runs/search/<name>); re-running resumes it")
     p.add_argument("--seeds", type=int, default=1, help="repeat each candidate with this many seeds")
-    p.add_argument("--strategy", default="train", choices=("train", "oneshot"),
-                   help="train every candidate, or one weight-sharing supernet over a depth axis")
+    p.add_argument("--strategy", default=strategy, choices=("train", "oneshot"),
+                   help=f"train every candidate, or one weight-sharing supernet over a depth axis (default {strategy})")
     p.add_argument("--backend", default="local", choices=("local", "ray"), help="run trials here or as Ray Tune trials")
     p.add_argument("--retry-failed", action="store_true", help="re-run trials journaled as failed")
     p.add_argument("--address", default=None, help="with --backend ray: an existing cluster (default: start a local Ray)")
@@ -44,20 +44,22 @@ def run_search(args, name: str, candidates_fn, title: str, base_label: str | Non
     """Validate every candidate first, then run the missing trials and write the reports."""
     try:
         candidates = candidates_fn()
+        if args.strategy == "oneshot":
+            supernet_overrides(candidates)
+            if args.backend != "local":
+                raise SearchSpaceError("--strategy oneshot trains one supernet in this process; "
+                                       "--backend ray is for --strategy train")
     except SearchSpaceError as err:
         sys.exit(str(err))
     run_dir = Path(args.out or Path("runs") / "search" / name)
     command = f"{args.prog} " + " ".join(shlex.quote(a) for a in args.argv)
     atomic.write_json(run_dir / "search.json", {"title": title, "base": args.base, "base_label": base_label,
                                                 "profile": args.profile, "data": args.data, "seeds": args.seeds,
-                                                "command": command, "candidates": [c["label"] for c in candidates]})
+                                                "strategy": args.strategy, "command": command,
+                                                "candidates": [c["label"] for c in candidates]})
     trials = [make_trial(args.base, c, args.profile, args.data, seed, args.strategy)
               for c in candidates for seed in range(args.seeds)]
     if args.strategy == "oneshot":
-        try:
-            supernet_overrides(candidates)
-        except SearchSpaceError as err:
-            sys.exit(str(err))
         for seed in range(args.seeds):
             run_oneshot(args.base, [t for t in trials if t["seed"] == seed], run_dir, args.retry_failed)
     elif args.backend == "ray":

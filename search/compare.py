@@ -36,11 +36,17 @@ def compare(run_a: str, run_b: str) -> dict:
     labels = [lbl for lbl in ra if lbl in rb and ra[lbl]["car_mAP"] is not None and rb[lbl]["car_mAP"] is not None]
     if len(labels) < 2:
         raise ValueError(f"{run_a} and {run_b} share fewer than two finished candidates")
-    wall = lambda run: sum(r.get("wall_s", 0) for r in Journal(run).records())  # noqa: E731
-    return {"candidates": labels, "kendall_tau": kendall_tau([ra[x]["car_mAP"] for x in labels],
-                                                             [rb[x]["car_mAP"] for x in labels]),
-            "wall_s": {"a": wall(run_a), "b": wall(run_b)}, "cost_ratio_b_over_a": wall(run_b) / max(wall(run_a), 1e-9),
-            "car_mAP": {x: [ra[x]["car_mAP"], rb[x]["car_mAP"]] for x in labels}}
+    def cost(run, key):  # summed over the trials both runs share
+        return sum(r.get(key) or 0 for r in Journal(run).records() if r["label"] in labels)
+
+    out = {"candidates": labels, "kendall_tau": kendall_tau([ra[x]["car_mAP"] for x in labels],
+                                                            [rb[x]["car_mAP"] for x in labels]),
+           "car_mAP": {x: [ra[x]["car_mAP"], rb[x]["car_mAP"]] for x in labels}}
+    for key in ("wall_s", "cpu_s"):  # CPU seconds are the fairer cost when the machine is shared
+        a, b = cost(run_a, key), cost(run_b, key)
+        out[key] = {"a": round(a, 1), "b": round(b, 1)}
+        out[f"{key.split('_')[0]}_ratio_b_over_a"] = round(b / a, 4) if a else None
+    return out
 
 
 def main(argv=None) -> int:

@@ -5,13 +5,17 @@ The supernet has the most blocks any candidate has in each stage; a candidate (s
 first k blocks of each stage, which in Flax means the subset of the supernet's top-level
 parameter entries whose names it shares (`stage2_block0..k-1`). Each step trains one subnet
 drawn uniformly from the candidates (each round of len(candidates) steps visits every
-candidate once, in a seeded random order); only its parameters move. Before a
-subnet is evaluated its batch-norm statistics are recalibrated on training batches, because the
-supernet's running statistics mix every subnet's activations.
+candidate once, in a seeded random order); only its parameters move. The subnet's depth is a
+traced input of the supernet (`DSFECNet.backbone(depth=...)`), so one compiled step trains
+every subnet and one compiled function recalibrates them: compiles, not steps, dominate a
+2-core budget. Before a subnet is evaluated its batch-norm statistics are recalibrated on
+training batches, because the supernet's running statistics mix every subnet's activations.
 """
 
 from __future__ import annotations
 
+import hashlib
+import re
 import time
 from pathlib import Path
 
@@ -20,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from dsfec_jax import zoo
+from dsfec_jax import checkpoint, zoo
 from dsfec_jax.data.batches import BatchStream, collate
 from dsfec_jax.data.pillarize import PillarSpec
 from dsfec_jax.data.sources import load_frames
@@ -39,6 +43,7 @@ from .space import SearchSpaceError
 
 CALIBRATION_BATCHES = 8
 BN_MOMENTUM = 0.99  # dsfec_jax.layers.conv.batch_norm
+BLOCK = re.compile(r"stage(\d)_block(\d+)$")
 
 
 def supernet_overrides(candidates: list[dict]) -> dict:
@@ -55,21 +60,32 @@ def subset(tree: dict, keys) -> dict:
     return {k: tree[k] for k in keys if k in tree}
 
 
-def subnet_step(sub, keys, tx, loss_cfg: LossConfig):
-    """A jitted step that trains the subnet `sub` inside the supernet state (state donated)."""
-    def loss_fn(params, batch_stats, batch):
-        outputs, updates = sub.apply({"params": params, "batch_stats": batch_stats}, batch["inputs"], train=True)
+def in_subnet(key: str, depth):
+    """Does the subnet of `depth` (traced int (4,)) use the supernet's top-level module `key`?"""
+    m = BLOCK.match(key)
+    return True if m is None else int(m[2]) < depth[int(m[1]) - 1]
+
+
+def keep_idle(new: dict, old: dict, depth) -> dict:
+    """`new` for the subnet's modules, `old` for the supernet's idle blocks."""
+    return {k: jax.tree.map(lambda n, o, a=in_subnet(k, depth): jnp.where(a, n, o), new[k], old[k]) for k in old}
+
+
+def supernet_step(supernet, tx, loss_cfg: LossConfig):
+    """One jitted step (state, batch, depth) -> (state, loss) that trains the subnet of `depth`."""
+    def loss_fn(params, batch_stats, batch, depth):
+        variables = {"params": params, "batch_stats": batch_stats}
+        outputs, updates = supernet.apply(variables, {**batch["inputs"], "depth": depth}, train=True)
         return detection_loss(outputs, batch["targets"], loss_cfg)[0], updates["batch_stats"]
 
-    def step(state, batch):
+    def step(state, batch, depth):
         grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
-        (loss, stats), g = grad_fn(subset(state["params"], keys), subset(state["batch_stats"], keys), batch)
-        grads = {k: g[k] if k in g else jax.tree.map(jnp.zeros_like, v) for k, v in state["params"].items()}
+        (loss, stats), grads = grad_fn(state["params"], state["batch_stats"], batch, depth)  # idle blocks: 0
         updates, opt_state = tx.update(grads, state["opt_state"], state["params"])
         moved = optax.apply_updates(state["params"], updates)
-        params = {k: moved[k] if k in keys else v for k, v in state["params"].items()}  # idle blocks stay put
-        return {"params": params, "batch_stats": {**state["batch_stats"], **stats}, "opt_state": opt_state,
-                "step": state["step"] + 1}, loss
+        return {"params": keep_idle(moved, state["params"], depth),  # weight decay must not move idle blocks
+                "batch_stats": keep_idle(stats, state["batch_stats"], depth),
+                "opt_state": opt_state, "step": state["step"] + 1}, loss
 
     return jax.jit(step, donate_argnums=0)
 
@@ -78,15 +94,20 @@ def module_keys(detector) -> tuple[str, ...]:
     return tuple(jax.eval_shape(detector.init, jax.random.key(0))["params"])
 
 
-def recalibrate(sub, params: dict, batch_stats: dict, batches: list[dict]) -> dict:
-    """BN running statistics of `sub` = the mean of its batch statistics over `batches`."""
-    apply = jax.jit(lambda v, x: sub.apply(v, x, train=True)[1]["batch_stats"])
-    means = []
-    for batch in batches:
-        new = apply({"params": params, "batch_stats": batch_stats}, batch["inputs"])
-        # new = m * old + (1 - m) * batch  =>  batch = (new - m * old) / (1 - m)
-        means.append(jax.tree.map(lambda n, o: (n - BN_MOMENTUM * o) / (1 - BN_MOMENTUM), new, batch_stats))
-    return jax.tree.map(lambda *x: np.mean(np.stack(x), 0), *means)
+def recalibrator(supernet):
+    """(variables, batches, depth) -> BN running statistics of the subnet of `depth` = the mean of
+    its batch statistics over `batches` (one compiled function for every depth)."""
+    batch_stats = jax.jit(lambda v, x, d: supernet.apply(v, {**x, "depth": d}, train=True)[1]["batch_stats"])
+
+    def recalibrate(variables: dict, batches: list[dict], depth) -> dict:
+        means = []
+        for batch in batches:
+            new, old = batch_stats(variables, batch["inputs"], depth), variables["batch_stats"]
+            # new = m * old + (1 - m) * batch  =>  batch = (new - m * old) / (1 - m)
+            means.append(jax.tree.map(lambda n, o: (n - BN_MOMENTUM * o) / (1 - BN_MOMENTUM), new, old))
+        return jax.tree.map(lambda *x: np.mean(np.stack(x), 0), *means)
+
+    return recalibrate
 
 
 def run_oneshot(base: str, trials: list[dict], run_dir: str | Path, retry_failed: bool = False,
@@ -109,46 +130,70 @@ def run_oneshot(base: str, trials: list[dict], run_dir: str | Path, retry_failed
 
 
 def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[str], log) -> None:
-    t0 = time.perf_counter()
     recipe, seed, data = get_recipe(trials[0]["recipe"]), trials[0]["seed"], trials[0]["data"]
     fixed = recipe.model_overrides()
     supernet = zoo.create(base, **supernet_overrides(trials), **fixed)
     subs = [zoo.create(base, **t["overrides"], **fixed) for t in trials]
-    keys = [module_keys(s) for s in subs]
     frames = load_frames(data, "train", recipe.train_frames, seed=0)
     cfg = supernet.config
     heads = dict(zip(HEAD_NAMES, cfg.head_classes))
     stream = BatchStream(frames, PillarSpec.of(cfg), heads, cfg.output_stride, recipe.schedule.batch_size, seed)
-    steps = recipe.schedule.total_steps(len(frames))
-    tx = optimizer(recipe.schedule, steps)
-    state = init_state(supernet, tx, jax.random.key(seed))
-    fns = [subnet_step(s, set(k), tx, LossConfig()) for s, k in zip(subs, keys)]
-    for step in range(steps):
-        round_, pos = divmod(step, len(subs))
-        i = int(np.random.default_rng([seed, 7, round_]).permutation(len(subs))[pos])
-        batch = stream.batch(step)
-        state, loss = fns[i](state, {"inputs": batch["inputs"], "targets": batch["targets"]})
-        if not np.isfinite(float(loss)):
-            raise FloatingPointError(f"supernet loss is {float(loss)} at step {step}")
-    supernet_s = time.perf_counter() - t0
-    log(f"supernet {cfg.stage_blocks}: {steps} steps in {supernet_s:.0f} s")
+    depths = [jnp.asarray(s.config.stage_blocks, jnp.int32) for s in subs]
+    steps = recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
+    state, supernet_s, supernet_cpu = _supernet(supernet, stream, depths, recipe, steps, seed,
+                                  journal.path.parent / supernet_file(trials), log)
+    recalibrate = recalibrator(supernet)
     calib = [collate([frames[j] for j in stream.indices(s)], PillarSpec.of(cfg), heads, cfg.output_stride)
              for s in range(CALIBRATION_BATCHES)]
     val = load_frames(data, "val", recipe.val_frames, seed=0)
-    for trial, sub, k in zip(trials, subs, keys):
+    for trial, sub, depth in zip(trials, subs, depths):
         if trial["key"] not in todo:
             continue
-        t1 = time.perf_counter()
-        params = subset(state["params"], k)
-        stats = recalibrate(sub, params, subset(state["batch_stats"], k), calib)
-        result = evaluate(Predictor(sub, {"params": params, "batch_stats": stats}), val)
-        costs = profile([zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats, warmup=1)[0]
+        t1, c1 = time.perf_counter(), time.process_time()
+        keys = module_keys(sub)
+        stats = recalibrate({"params": state["params"], "batch_stats": state["batch_stats"]}, calib, depth)
+        variables = {"params": subset(state["params"], keys), "batch_stats": subset(stats, keys)}
+        result = evaluate(Predictor(sub, variables), val)
+        costs = profile([zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats,
+                        warmup=1, light=recipe.light_profile)[0]
         metrics = {kk: result[kk] for kk in ("car_mAP", "car_AP4", "mAP")}
         metrics.update(class_mAP=result["metrics"]["class_mAP"], **{"AP@4": result["metrics"]["AP@4"]})
         journal.append({**trial, "status": "ok", "metrics": metrics,
                         "costs": {c: costs[c] for c in ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")},
                         "supernet": {"stage_blocks": list(cfg.stage_blocks), "steps": steps,
-                                     "wall_s": round(supernet_s, 1)},
+                                     "wall_s": round(supernet_s, 1), "cpu_s": round(supernet_cpu, 1)},
                         "wall_s": round(supernet_s / len(trials) + time.perf_counter() - t1, 1),
+                        "cpu_s": round(supernet_cpu / len(trials) + time.process_time() - c1, 1),
                         "environment": environment()})
         log(f"    {trial['label']}: car mAP {metrics['car_mAP']:.2f} (inherited weights)")
+
+
+def supernet_file(trials: list[dict]) -> str:
+    """The saved supernet belongs to exactly this set of candidates, recipe, data and seed."""
+    ident = hashlib.sha1(" ".join(sorted(t["key"] for t in trials)).encode()).hexdigest()[:12]
+    return f"supernet_{ident}.msgpack"
+
+
+def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, path: Path, log):
+    """Train the supernet (or read the one an interrupted run saved) -> (state, wall s, CPU s)."""
+    tx = optimizer(recipe.schedule, steps)
+    if path.is_file():
+        manifest = checkpoint.read_manifest(path)
+        log(f"supernet from {path} ({manifest['steps']} steps, trained in {manifest['wall_s']:.0f} s)")
+        state = checkpoint.load(path, init_state(supernet, tx, jax.random.key(seed)))
+        return state, manifest["wall_s"], manifest["cpu_s"]
+    t0, c0 = time.perf_counter(), time.process_time()
+    state = init_state(supernet, tx, jax.random.key(seed))
+    step_fn = supernet_step(supernet, tx, LossConfig())
+    for step in range(steps):
+        round_, pos = divmod(step, len(depths))
+        i = int(np.random.default_rng([seed, 7, round_]).permutation(len(depths))[pos])
+        batch = stream.batch(step)
+        state, loss = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]}, depths[i])
+        if not np.isfinite(float(loss)):
+            raise FloatingPointError(f"supernet loss is {float(loss)} at step {step}")
+    wall_s, cpu_s = time.perf_counter() - t0, time.process_time() - c0
+    log(f"supernet {supernet.config.stage_blocks}: {steps} steps in {wall_s:.0f} s")
+    checkpoint.save(path, state, {"steps": steps, "seed": seed, "wall_s": round(wall_s, 1), "cpu_s": round(cpu_s, 1),
+                                  "stage_blocks": list(supernet.config.stage_blocks)})
+    return state, wall_s, cpu_s

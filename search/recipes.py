@@ -25,6 +25,8 @@ class Recipe:
     max_pillars: int
     window: int | None         # training windows (cells); None: the whole (recipe) grid
     latency_repeats: int
+    supernet_steps: int | None  # --strategy oneshot: steps of the one supernet, shared by all candidates
+    light_profile: bool        # analytic sizes + whole-network latency only (one compile per candidate)
 
     def model_overrides(self) -> dict:
         out = {"max_pillars": self.max_pillars}
@@ -37,10 +39,12 @@ NEAR_GRID = Grid((0.0, 32.0), (-16.0, 16.0), DSFEC_GRID.z_range, DSFEC_GRID.cell
 SMOKE_GRID = Grid((0.0, 8.0), (-4.0, 4.0), DSFEC_GRID.z_range, DSFEC_GRID.cell)
 
 RECIPES = {
-    "smoke": Recipe("smoke", get_schedule("quick", steps=2, batch_size=2, warmup_steps=1), 4, 2, SMOKE_GRID, 64, None, 1),
+    "smoke": Recipe("smoke", get_schedule("quick", steps=2, batch_size=2, warmup_steps=1), 4, 2, SMOKE_GRID, 64, None, 1,
+                    supernet_steps=4, light_profile=True),
     "quick": Recipe("quick", get_schedule("quick", steps=150, batch_size=4, warmup_steps=15), 400, 60,
-                    NEAR_GRID, 512, None, 5),
-    "paper": Recipe("paper", get_schedule("paper"), 4800, 500, None, 2048, None, 20),
+                    NEAR_GRID, 512, None, 5, supernet_steps=480, light_profile=True),
+    "paper": Recipe("paper", get_schedule("paper"), 4800, 500, None, 2048, None, 20,
+                    supernet_steps=None, light_profile=False),
 }
 
 

@@ -73,6 +73,21 @@ def markdown(table: list[dict], base_label: str | None, title: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def provenance(records: list[dict], meta: dict) -> str:
+    """How the table was measured: strategy, recipe, training cost, the command."""
+    ok = [r for r in records if r["status"] == "ok"]
+    strategy = meta.get("strategy") or (records[0].get("strategy", "train"))
+    wall = sum(r.get("wall_s", 0) for r in records)
+    line = f"Profile `{meta.get('profile', records[0].get('recipe'))}`, strategy `{strategy}`"
+    nets = {json.dumps(r["supernet"], sort_keys=True) for r in ok if "supernet" in r}
+    if nets:
+        sn = [json.loads(n) for n in nets]
+        line += "; supernet " + ", ".join(f"{tuple(n['stage_blocks'])} trained {n['steps']} steps in {n['wall_s']:.0f} s"
+                                          for n in sn)
+    line += f"; {len(records)} trial records, {wall / 60:.1f} min of trial wall time."
+    return "\n" + line + "\n" + (f"\nCommand: `{meta['command']}`\n" if meta.get("command") else "")
+
+
 def csv_text(table: list[dict]) -> str:
     buf = io.StringIO()
     keys = ["label", "seeds", "failed"] + [k for key, _, _ in COLUMNS for k in (key, key + "_sd")]
@@ -124,8 +139,7 @@ def write_reports(run_dir: str | Path) -> dict:
     meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
     table = rows(records)
     title = meta.get("title", "ablation")
-    atomic.write_text(run_dir / "report.md", markdown(table, meta.get("base_label"), title)
-                      + (f"\nCommand: `{meta['command']}`\n" if meta.get("command") else ""))
+    atomic.write_text(run_dir / "report.md", markdown(table, meta.get("base_label"), title) + provenance(records, meta))
     atomic.write_text(run_dir / "report.csv", csv_text(table))
     atomic.write_json(run_dir / "records.json", records)
     plot(table, "gflops", run_dir / "map_vs_gflops.png", title)

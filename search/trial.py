@@ -33,7 +33,7 @@ def make_trial(base: str, candidate: dict, recipe: str, data: str, seed: int, st
 
 def run_trial(trial: dict, run_dir: str | Path) -> dict:
     """Train and measure one candidate; a failure (NaN loss, OOM, ...) becomes a 'failed' record."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     record = {k: jsonable(v) for k, v in trial.items()}
     try:
         record.update(measure(trial, Path(run_dir) / "trials" / trial["key"]))
@@ -42,6 +42,7 @@ def run_trial(trial: dict, run_dir: str | Path) -> dict:
         record.update(status="failed", error=f"{type(err).__name__}: {err}",
                       traceback=traceback.format_exc(limit=4)[-2000:])
     record["wall_s"] = round(time.perf_counter() - t0, 1)
+    record["cpu_s"] = round(time.process_time() - c0, 1)  # the cost to quote on a shared machine
     record["environment"] = environment()
     return record
 
@@ -54,6 +55,6 @@ def measure(trial: dict, trial_dir: Path) -> dict:
     _, _, scores = fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
                        window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False)
     costs = profile([zoo.create(trial["base"], **trial["overrides"])], timing=True,
-                    repeats=recipe.latency_repeats, warmup=1)[0]
+                    repeats=recipe.latency_repeats, warmup=1, light=recipe.light_profile)[0]
     return {"metrics": scores,
             "costs": {k: costs[k] for k in ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")}}

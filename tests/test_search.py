@@ -17,7 +17,8 @@ def tiny_search(monkeypatch):
     """A tiny registered base and a tiny recipe, so a sweep trains in seconds."""
     monkeypatch.setitem(zoo.REGISTRY, "tiny_l", tiny("dsfec_l", name="tiny_l", stage_blocks=(1, 2, 1, 1)).config)
     tiny_recipe = recipes.Recipe("quick", get_schedule("quick", steps=2, batch_size=2, warmup_steps=1), 4, 2,
-                                 Grid((0.0, 8.0), (-4.0, 4.0), (-2.5, 2.5), 0.5), 64, None, 1)
+                                 Grid((0.0, 8.0), (-4.0, 4.0), (-2.5, 2.5), 0.5), 64, None, 1,
+                                 supernet_steps=2, light_profile=True)
     monkeypatch.setitem(recipes.RECIPES, "quick", tiny_recipe)
     return "tiny_l"
 
@@ -55,7 +56,8 @@ def test_activation_candidates_one_component_at_a_time():
 
 def test_real_sweep_trains_measures_and_reports(tiny_search, tmp_path, capsys):
     out = tmp_path / "run"
-    assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--out", str(out)]) == 0
+    assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "train",
+                        "--out", str(out)]) == 0
     records = Journal(out).records()
     assert [r["status"] for r in records] == ["ok", "ok"], [r.get("error") for r in records]
     g = [r["costs"]["gflops"] for r in records]
@@ -143,7 +145,7 @@ def test_experiment_tables_print_the_paper_beside_ours(tmp_path, monkeypatch, ca
 def test_ray_backend_runs_a_two_trial_sweep(tmp_path):
     out = tmp_path / "ray_run"
     assert blocks.main(["--stage", "4", "--values", "1,2", "--base", "dsfec_s", "--profile", "smoke",
-                        "--backend", "ray", "--out", str(out)]) == 0
+                        "--strategy", "train", "--backend", "ray", "--out", str(out)]) == 0
     records = Journal(out).records()
     assert sorted(r["label"] for r in records) == ["stage4_blocks=1", "stage4_blocks=2"]
     assert all(r["status"] == "ok" for r in records), [r.get("error") for r in records]
@@ -166,6 +168,58 @@ def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path
     sub = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 1, 1, 1)))
     sup = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 2, 1, 1)))
     assert set(sub) < set(sup) and "stage2_block1" in set(sup) - set(sub)
+
+
+def test_supernet_at_a_depth_is_the_subnet_and_trains_only_its_blocks():
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    from search import oneshot
+    from dsfec_jax.train.schedules import optimizer
+    from dsfec_jax.train.step import init_state
+
+    sup, sub = tiny("dsfec_l", stage_blocks=(1, 3, 1, 1)), tiny("dsfec_l", stage_blocks=(1, 2, 1, 1))
+    variables = sup.init(jax.random.key(1))
+    keys = oneshot.module_keys(sub)
+    sub_vars = {c: oneshot.subset(variables[c], keys) for c in variables}
+    inputs = sup.dummy_inputs(2, seed=3)
+    depth = jnp.array([1, 2, 1, 1])
+    gated, plain = sup.apply(variables, {**inputs, "depth": depth}), sub.apply(sub_vars, inputs)
+    for a, b in zip(jax.tree.leaves(gated), jax.tree.leaves(plain)):
+        np.testing.assert_allclose(a, b, atol=1e-5)
+    deeper = sup.apply(variables, {**inputs, "depth": jnp.array([1, 3, 1, 1])})
+    assert not np.allclose(jax.tree.leaves(deeper)[0], jax.tree.leaves(plain)[0])
+    # one step of the depth-2 subnet moves its blocks and leaves the idle third block as it was
+    tx = optimizer(get_schedule("quick", steps=2, warmup_steps=1), 2)
+    state = init_state(sup, tx, jax.random.key(1))
+    before = jax.tree.map(np.array, state["params"])
+    outputs = sup.apply(variables, inputs)  # all-background targets: the focal loss still has gradients
+    targets = {h: {"cls": jnp.zeros_like(o["cls"]), "box": jnp.zeros_like(o["box"]),
+                   "reg_mask": jnp.zeros(o["cls"].shape[:-1])} for h, o in outputs.items()}
+    state, _ = oneshot.supernet_step(sup, tx, oneshot.LossConfig())(state, {"inputs": inputs, "targets": targets}, depth)
+    moved = lambda k: any(not np.array_equal(a, b) for a, b in
+                          zip(jax.tree.leaves(before[k]), jax.tree.leaves(state["params"][k])))
+    assert moved("stage2_block1") and not moved("stage2_block2")
+
+
+def test_oneshot_resume_reuses_the_saved_supernet(tiny_search, tmp_path):
+    out = tmp_path / "oneshot"
+    argv = ["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "oneshot", "--out", str(out)]
+    assert blocks.main(argv) == 0
+    assert len(list(out.glob("supernet_*.msgpack"))) == 1
+    journal = Journal(out)
+    first = journal.records()
+    journal.path.write_text(json.dumps(first[0]) + "\n")  # as if killed while ranking the second candidate
+    lines = []
+    from search.oneshot import run_oneshot
+    from search.trial import make_trial
+    trials = [make_trial(tiny_search, {"label": r["label"], "overrides": {"stage_blocks": tuple(r["overrides"]["stage_blocks"])}},
+                         "quick", "synthetic", 0, "oneshot") for r in first]
+    run_oneshot(tiny_search, trials, out, log=lines.append)
+    assert any(line.startswith("supernet from") for line in lines), lines
+    records = journal.records()
+    assert [r["label"] for r in records] == [r["label"] for r in first]
+    assert records[1]["metrics"] == first[1]["metrics"]  # same supernet, same ranking
 
 
 def test_oneshot_refuses_non_depth_axes():

@@ -142,14 +142,18 @@ class DSFECNet(nn.Module):
         pillars = self.pillar_net(points, mask, coords, train)
         return scatter_to_bev(pillars, coords, self.cfg.grid)
 
-    def backbone(self, image, train: bool = False) -> list:
+    def backbone(self, image, train: bool = False, depth=None) -> list:
+        """Stem + 4 stages. `depth` (int array (4,), may be traced) runs only the first depth[i]
+        blocks of stage i, the rest pass x through: every subnet of a supernet in one compiled
+        function (the one-shot search). Block 0 (the strided one) always runs."""
         x = image
         for layer in self.stem:
             x = layer(x, train)
         stages = []
-        for blocks in self.stages:
-            for block in blocks:
-                x = block(x, train)
+        for i, blocks in enumerate(self.stages):
+            for b, block in enumerate(blocks):
+                y = block(x, train)
+                x = y if depth is None or b == 0 else jnp.where(b < depth[i], y, x)
             stages.append(x)
         return stages
 
@@ -157,8 +161,8 @@ class DSFECNet(nn.Module):
         x = self.neck(stages, train)
         return {name: head(x, train) for name, head in self.heads.items()}
 
-    def __call__(self, points, mask, coords, train: bool = False):
-        return self.detect(self.backbone(self.encode(points, mask, coords, train), train), train)
+    def __call__(self, points, mask, coords, train: bool = False, depth=None):
+        return self.detect(self.backbone(self.encode(points, mask, coords, train), train, depth), train)
 
 
 def random_pillar_inputs(cfg: DSFECConfig, batch_size: int, seed: int, occupancy: float) -> dict:

@@ -14,20 +14,19 @@ import numpy as np
 STAGES = ("pillar_net", "backbone", "neck_heads")
 
 
-def stage_functions(detector, variables, inputs) -> dict:
-    """name -> zero-argument callable that runs that stage (jitted, compiled, blocking)."""
-    enc = jax.jit(lambda v, x: detector.apply_method(v, "encode", x["points"], x["mask"], x["coords"]))
-    bb = jax.jit(lambda v, img: detector.apply_method(v, "backbone", img))
-    det = jax.jit(lambda v, st: detector.apply_method(v, "detect", st))
+def stage_functions(detector, variables, inputs, per_stage: bool = True) -> dict:
+    """name -> zero-argument callable that runs that stage (jitted, compiled, blocking);
+    per_stage=False: the whole network only."""
     full = jax.jit(detector.apply)
-    image = enc(variables, inputs)
-    stages = bb(variables, image)
-    calls = {
-        "total": lambda: full(variables, inputs),
-        "pillar_net": lambda: enc(variables, inputs),
-        "backbone": lambda: bb(variables, image),
-        "neck_heads": lambda: det(variables, stages),
-    }
+    calls = {"total": lambda: full(variables, inputs)}
+    if per_stage:
+        enc = jax.jit(lambda v, x: detector.apply_method(v, "encode", x["points"], x["mask"], x["coords"]))
+        bb = jax.jit(lambda v, img: detector.apply_method(v, "backbone", img))
+        det = jax.jit(lambda v, st: detector.apply_method(v, "detect", st))
+        image = enc(variables, inputs)
+        stages = bb(variables, image)
+        calls.update(pillar_net=lambda: enc(variables, inputs), backbone=lambda: bb(variables, image),
+                     neck_heads=lambda: det(variables, stages))
     return {k: (lambda f=f: jax.block_until_ready(f())) for k, f in calls.items()}
 
 

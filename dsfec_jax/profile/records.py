@@ -9,16 +9,15 @@ from . import counting, latency, memory
 from .environment import environment
 
 
-def size_record(detector) -> dict:
-    """Everything but latency: params, analytic and XLA GFLOPs, memory (no timing loop)."""
+def size_record(detector, xla: bool = True) -> dict:
+    """Everything but latency: params, analytic and XLA GFLOPs, memory (no timing loop).
+    xla=False skips the compile behind the XLA columns (a search's light profile)."""
     variables = detector.init(jax.random.key(0))
     inputs = detector.dummy_inputs(1)
     params = counting.count_params(variables)
     flops = counting.count_gflops(detector)
-    compiled = counting.compile_network(detector, variables, inputs)
-    xla = counting.xla_gflops(compiled)
     cfg = detector.config
-    return {
+    record = {
         "model": cfg.name,
         "family": cfg.family,
         "input": {k: list(v.shape) for k, v in inputs.items()},
@@ -28,30 +27,34 @@ def size_record(detector) -> dict:
         "gflops": round(flops["total"], 4),
         "gflops_per_stage": {k: round(v, 4) for k, v in flops["per_stage"].items()},
         "gflops_convention": counting.FLOPS_CONVENTION,
-        "xla_gflops": round(xla, 4),
-        "xla_vs_analytic": round(xla / flops["total"] - 1, 4),
         "memory_mb": round(memory.paper_memory_mb(detector, variables), 4),
         "memory_convention": "stem input + output maps (float32, batch 1) + stem weights, MiB (DSFEC Table 2)",
-        "xla_peak_mb": round(memory.xla_peak_mb(compiled), 2),
         "notes": cfg.notes,
     }
+    if xla:
+        compiled = counting.compile_network(detector, variables, inputs)
+        xla_gflops = counting.xla_gflops(compiled)
+        record.update(xla_gflops=round(xla_gflops, 4), xla_vs_analytic=round(xla_gflops / flops["total"] - 1, 4),
+                      xla_peak_mb=round(memory.xla_peak_mb(compiled), 2))
+    return record
 
 
-def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int = 3) -> list[dict]:
-    """Records for `detectors`; latencies come from one interleaved loop over all of them."""
-    records = [size_record(d) for d in detectors]
+def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int = 3, light: bool = False) -> list[dict]:
+    """Records for `detectors`; latencies come from one interleaved loop over all of them.
+    light=True: no XLA columns and only the whole network timed (one compile per model, not five)."""
+    records = [size_record(d, xla=not light) for d in detectors]
     env = environment()
     if timing:
         suites = {}
         for d in detectors:
             variables = d.init(jax.random.key(0))
-            suites[d.name] = latency.stage_functions(d, variables, d.dummy_inputs(1))
+            suites[d.name] = latency.stage_functions(d, variables, d.dummy_inputs(1), per_stage=not light)
         times = latency.time_interleaved(suites, repeats, warmup)
         for rec, d in zip(records, detectors):
             t = times[rec["model"]]
             rec["latency_ms"] = round(t["total"]["median_ms"], 3)
             rec["latency_p90_ms"] = round(t["total"]["p90_ms"], 3)
-            rec["latency_per_stage_ms"] = {s: round(t[s]["median_ms"], 3) for s in latency.STAGES}
+            rec["latency_per_stage_ms"] = {s: round(t[s]["median_ms"], 3) for s in latency.STAGES if s in t}
             rec["latency_setup"] = {"batch": 1, "repeats": repeats, "warmup": warmup, "interleaved": True,
                                     "depthwise_impl": d.config.depthwise_impl, **env}
     else:
