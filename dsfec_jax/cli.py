@@ -61,12 +61,22 @@ def parse(argv=None) -> argparse.Namespace:
     sh.add_argument("--checkpoint", default="best", choices=("best", "last"))
     sh.add_argument("--frames", type=int, default=200, help="synthetic val and test frames to measure")
     sh.add_argument("--out-dir", default=None, help="default: the package's weights directory")
+    ex = sub.add_parser("export", help="ONNX + jax.export of the network with box decoding (NMS stays on the host)")
+    ex.add_argument("--model", required=True)
+    ex.add_argument("--weights", default=None, help="weights/checkpoint file (default: shipped weights)")
+    ex.add_argument("--out", required=True, help="directory for model.onnx, model.jax_export, deploy.json")
+    ex.add_argument("--top-k", type=int, default=100, help="boxes per head kept by the in-graph decode")
+    ex.add_argument("--max-pillars", type=int, default=RUN_PILLARS)
+    ex.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
     for name, split in (("eval", "test"), ("predict", "test")):
         q = sub.add_parser(name, help=f"{name} a zoo model")
         common(q, split)
         q.add_argument("--weights", default=None, help="weights/checkpoint file (default: shipped weights)")
         q.add_argument("--score-threshold", type=float, default=0.05)
         q.add_argument("--json", action="store_true")
+        q.add_argument("--runtime", default="jax", choices=("jax", "onnx"),
+                       help="onnx: run an exported model (--onnx DIR from `dsfec export`) with ONNX Runtime")
+        q.add_argument("--onnx", default=None, help="with --runtime onnx: the export directory")
         if name == "predict":
             q.add_argument("--out", required=True, help="nuScenes submission JSON to write")
             q.add_argument("--png-dir", default=None, help="also write a BEV PNG per frame here")
@@ -96,15 +106,24 @@ def run_eval_or_predict(args) -> int:
     from .data.sources import load_frames
     from .evaluate import headline, predict_frames, score
 
-    overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
-    predictor = zoo.load(args.model, weights=args.weights,
-                         predictor_options={"score_threshold": args.score_threshold}, **overrides)
+    if args.runtime == "onnx":
+        from .deploy import OrtPredictor
+        if not args.onnx:
+            sys.exit("--runtime onnx needs --onnx DIR (written by `dsfec export --model NAME --out DIR`)")
+        predictor = OrtPredictor(args.onnx, score_threshold=args.score_threshold)
+        if predictor.manifest["model"] != args.model:
+            sys.exit(f"{args.onnx}: holds {predictor.manifest['model']!r}, not --model {args.model!r}")
+    else:
+        overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
+        predictor = zoo.load(args.model, weights=args.weights,
+                             predictor_options={"score_threshold": args.score_threshold}, **overrides)
     frames = load_frames(args.data, args.split, args.frames, args.seed)
     detections = predict_frames(predictor, frames)
     if args.command == "predict":
         write_predictions(args, frames, detections, predictor)
-    metrics = score(frames, detections, grid=predictor.detector.config.grid)
-    result = {"model": args.model, "weights": str(args.weights or zoo.shipped_weights(args.model)),
+    metrics = score(frames, detections, grid=predictor.spec.grid)
+    result = {"model": args.model, "runtime": args.runtime,
+              "weights": str(args.onnx if args.runtime == "onnx" else args.weights or zoo.shipped_weights(args.model)),
               "data": args.data, "split": args.split, "seed": args.seed, "frames": len(frames),
               **headline(metrics), "metrics": metrics}
     if args.json:
@@ -122,7 +141,7 @@ def write_predictions(args, frames, detections, predictor) -> None:
     write_submission(args.out, results)
     if args.gt_out:
         from .evaluate import in_grid
-        grid = predictor.detector.config.grid  # the boxes the metric scores: those on the model's grid
+        grid = predictor.spec.grid  # the boxes the metric scores: those on the model's grid
         gt = {f.frame_id: boxes_to_entries(f.frame_id, in_grid(f.boxes, grid)) for f in (frames[i] for i in range(len(frames)))}
         write_submission(args.gt_out, gt, is_gt=True)
     if args.png_dir:
@@ -130,7 +149,7 @@ def write_predictions(args, frames, detections, predictor) -> None:
         for i in range(len(frames)):
             f = frames[i]
             safe = f.frame_id.replace("/", "_") or f"frame_{i:06d}"
-            save_bev_png(f, Path(args.png_dir) / f"{safe}.png", predictor.detector.config.grid,
+            save_bev_png(f, Path(args.png_dir) / f"{safe}.png", predictor.spec.grid,
                          predicted=detections[f.frame_id].boxes)
 
 
@@ -165,12 +184,30 @@ def run_ship(args) -> int:
     return 0
 
 
+def run_export(args) -> int:
+    from . import zoo
+    from .deploy import export
+
+    det = zoo.create(args.model, max_pillars=args.max_pillars, **parse_overrides(args.set))
+    path = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
+    if not path.is_file():
+        sys.exit(f"no weights at {path}: pass --weights (a trained checkpoint or weights file)")
+    variables = zoo.load_variables(det, path)
+    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    out = export(det, variables, args.out, top_k=args.top_k,
+                 source={"weights": str(path), "command": "dsfec " + " ".join(shlex.quote(a) for a in sys.argv[1:])})
+    print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))
+    return 0
+
+
 def main(argv=None) -> int:
     args = parse(argv)
     if args.command == "train":
         return run_train(args)
     if args.command == "ship":
         return run_ship(args)
+    if args.command == "export":
+        return run_export(args)
     return run_eval_or_predict(args)
 
 

@@ -46,5 +46,5 @@ def headline(metrics: dict) -> dict:
 
 
 def evaluate(predictor: Predictor, frames: Sequence[Frame], classes=nuscenes.DSFEC_CLASSES) -> dict:
-    metrics = score(frames, predict_frames(predictor, frames), classes, predictor.detector.config.grid)
+    metrics = score(frames, predict_frames(predictor, frames), classes, predictor.spec.grid)
     return {**headline(metrics), "metrics": metrics}

@@ -23,20 +23,18 @@ class Detections(NamedTuple):
     scores: np.ndarray
 
 
-class Predictor:
-    """`predictor(points_NxF | Frame) -> Detections`. Points' columns follow the model's
-    `point_features` unless a Frame (with named columns) is given."""
+class HostPipeline:
+    """What every runtime shares: pillarize on the host, run the network + decode (the runtime's
+    `run`), rotated NMS per class on the host. A subclass sets the fields and `run(batch)`."""
 
-    def __init__(self, detector, variables, score_threshold: float = 0.1, top_k: int = 100,
-                 nms_iou: float = 0.2, max_boxes: int = 500):
-        cfg = detector.config
-        self.detector, self.variables = detector, variables
-        self.spec = PillarSpec.of(cfg)
-        self.head_classes = dict(zip(HEAD_NAMES, cfg.head_classes))
-        self.class_names = [c for classes in self.head_classes.values() for c in classes]
+    def _setup(self, spec: PillarSpec, head_classes: dict, score_threshold: float, nms_iou: float,
+               max_boxes: int) -> None:
+        self.spec, self.head_classes = spec, head_classes
+        self.class_names = [c for classes in head_classes.values() for c in classes]
         self.score_threshold, self.nms_iou, self.max_boxes = score_threshold, nms_iou, max_boxes
-        cells = cell_centres(cfg.grid, cfg.output_stride)
-        self.network = jax.jit(lambda v, x: decode_heads(detector.apply(v, x), self.head_classes, cells, top_k))
+
+    def run(self, batch: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        raise NotImplementedError
 
     def __call__(self, points) -> Detections:
         return self.predict_batch([points])[0]
@@ -46,7 +44,7 @@ class Predictor:
                   for p in items]
         tensors = [pillarize(a, self.spec)[0] for a in arrays]
         batch = {k: np.stack([t[k] for t in tensors]) for k in tensors[0]}
-        boxes, scores, labels = jax.device_get(self.network(self.variables, batch))
+        boxes, scores, labels = self.run(batch)
         return [self._postprocess(b, s, l) for b, s, l in zip(boxes, scores, labels)]
 
     def _postprocess(self, boxes, scores, labels) -> Detections:
@@ -60,3 +58,19 @@ class Predictor:
                     np.column_stack([boxes[:, 2:4], h]).astype(np.float32),
                     boxes[:, 4].astype(np.float32), np.zeros((len(keep), 2), np.float32), names)
         return Detections(out, scores.astype(np.float32))
+
+
+class Predictor(HostPipeline):
+    """`predictor(points_NxF | Frame) -> Detections` with the jitted JAX network and decode.
+    Points' columns follow the model's `point_features` unless a Frame (named columns) is given."""
+
+    def __init__(self, detector, variables, score_threshold: float = 0.1, top_k: int = 100,
+                 nms_iou: float = 0.2, max_boxes: int = 500):
+        cfg = detector.config
+        self.detector, self.variables = detector, variables
+        self._setup(PillarSpec.of(cfg), dict(zip(HEAD_NAMES, cfg.head_classes)), score_threshold, nms_iou, max_boxes)
+        cells = cell_centres(cfg.grid, cfg.output_stride)
+        self.network = jax.jit(lambda v, x: decode_heads(detector.apply(v, x), self.head_classes, cells, top_k))
+
+    def run(self, batch: dict):
+        return jax.device_get(self.network(self.variables, batch))

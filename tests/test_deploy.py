@@ -1,0 +1,118 @@
+"""Export parity: ONNX Runtime (grouped depthwise kernel) against the jitted JAX network
+(shifted kernel) on synthetic and real frames, for every registered model."""
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from dsfec_jax import zoo
+from dsfec_jax.data.pillarize import PillarSpec, pillarize, select_columns
+from dsfec_jax.data.sources import load_frames
+from dsfec_jax.deploy import OrtPredictor, export
+from dsfec_jax.deploy.export import MAP_OUTPUTS, end_to_end, load_jax_export
+from dsfec_jax.predict import Predictor
+from conftest import tiny
+
+
+def frame_inputs(det, frame) -> dict:
+    tensors, _ = pillarize(select_columns(frame, det.config.point_features), PillarSpec.of(det.config))
+    return {k: v[None] for k, v in tensors.items()}
+
+
+def assert_decoded_match(got, want, tol=1e-4, box_tol=1e-3):
+    """Top-k outputs agree; among equal scores (saturated random weights) the order may differ,
+    so boxes are compared where a score is unique to within `tol`. Boxes get 1 mm / 1 mrad:
+    the yaw is an atan2 of two small codes, which amplifies the maps' float32 noise."""
+    (gb, gs, gl), (wb, ws, wl) = got, want
+    np.testing.assert_allclose(gs, ws, atol=tol)
+    s = ws[0]
+    gap = np.minimum(np.abs(np.diff(s, prepend=np.inf)), np.abs(np.diff(s, append=-np.inf)))
+    unique = gap > tol
+    assert unique.sum() >= 5, "too few distinct scores to compare boxes"
+    np.testing.assert_array_equal(gl[0][unique], wl[0][unique])
+    np.testing.assert_allclose(gb[0][unique], wb[0][unique], rtol=box_tol, atol=box_tol)
+
+
+def realistic_variables(det, name: str) -> dict:
+    """Shipped weights where there are some (they fit any grid); otherwise random weights with
+    batch-norm statistics calibrated on a synthetic batch, so activations have a trained
+    network's scale (raw random init blows them up to 1e2-1e3 and float32 rounding with them)."""
+    if zoo.shipped_weights(name).is_file():
+        return zoo.load_variables(det, zoo.shipped_weights(name))
+    from search.oneshot import BN_MOMENTUM
+
+    variables = det.init(jax.random.key(0))
+    frames = load_frames("synthetic", "train", 4)
+    batch = {k: np.concatenate([frame_inputs(det, f)[k] for f in frames]) for k in ("points", "mask", "coords")}
+    _, updates = det.apply(variables, batch, train=True)
+    stats = jax.tree.map(lambda n, o: (n - BN_MOMENTUM * o) / (1 - BN_MOMENTUM), updates["batch_stats"],
+                         variables["batch_stats"])
+    return {"params": variables["params"], "batch_stats": stats}
+
+
+@pytest.fixture(scope="module")
+def real_frame():
+    from conftest import shared_data_dir
+
+    return load_frames(f"tj4d:{shared_data_dir() / 'tj4dradset' / 'Sample'}", "all", 1)[0]
+
+
+@pytest.mark.parametrize("name", zoo.available())
+def test_onnx_matches_jitted_jax_on_synthetic_and_real_frames(name, tmp_path, real_frame):
+    import onnxruntime as ort
+
+    det = tiny(name)  # shifted depthwise kernel: the jitted path users run
+    variables = realistic_variables(det, name)
+    paths = export(det, variables, tmp_path, top_k=50, with_maps=True)
+    session = ort.InferenceSession(str(paths["onnx"]), providers=["CPUExecutionProvider"])
+    reference = jax.jit(end_to_end(det, variables, top_k=50, with_maps=True))
+    artifact = load_jax_export(paths["jax_export"])
+    synthetic = load_frames("synthetic", "val", 1)[0]
+    for frame in (synthetic, real_frame):
+        inputs = frame_inputs(det, frame)
+        assert inputs["mask"].any(), "the frame must put points on the tiny grid"
+        want = [np.asarray(x) for x in reference(inputs["points"], inputs["mask"], inputs["coords"])]
+        got = session.run(None, inputs)
+        for key, g, w in zip(MAP_OUTPUTS, got[3:], want[3:]):  # the head maps themselves
+            scale = max(1.0, float(np.abs(w).max()))  # 1e-4 of the map's range: float32 over ~30 layers
+            assert np.abs(g - w).max() <= 1e-4 * scale, (name, key, float(np.abs(g - w).max()), scale)
+        assert_decoded_match(got[:3], want[:3])
+        again = [np.asarray(x) for x in artifact(inputs["points"], inputs["mask"], inputs["coords"])]
+        assert_decoded_match(again[:3], want[:3])
+
+
+def test_ort_predictor_matches_the_jax_predictor(tmp_path):
+    det = tiny("dsfec_s")
+    variables = det.init(jax.random.key(1))
+    export(det, variables, tmp_path / "s", top_k=30)
+    frames = load_frames("synthetic", "val", 2)
+    ours = OrtPredictor(tmp_path / "s", score_threshold=0.0).predict_batch(list(frames))
+    ref = Predictor(det, variables, score_threshold=0.0, top_k=30).predict_batch(list(frames))
+    for a, b in zip(ours, ref):
+        assert len(a.scores) == len(b.scores) > 0
+        np.testing.assert_allclose(np.sort(a.scores), np.sort(b.scores), atol=1e-4)
+
+
+def test_ort_predictor_names_the_missing_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match="model.onnx"):
+        OrtPredictor(tmp_path)
+
+
+def test_export_command_writes_a_runnable_model_from_shipped_weights(tmp_path, capsys):
+    from dsfec_jax.cli import main
+
+    assert main(["export", "--model", "dsfec_s", "--out", str(tmp_path), "--max-pillars", "256", "--top-k", "20"]) == 0
+    assert {"onnx", "jax_export", "manifest"} <= set(json.loads(capsys.readouterr().out))
+    manifest = json.loads((tmp_path / "deploy.json").read_text())
+    assert manifest["source"]["command"].startswith("dsfec ") and manifest["versions"]["jax"]
+    frame = load_frames("synthetic", "test", 1)[0]
+    ours, ref = OrtPredictor(tmp_path)(frame), zoo.load("dsfec_s", max_pillars=256, predictor_options={"top_k": 20})(frame)
+    assert len(ours.scores) == len(ref.scores) > 0
+    np.testing.assert_allclose(ours.scores, ref.scores, atol=1e-4)
+
+    assert main(["eval", "--model", "dsfec_s", "--runtime", "onnx", "--onnx", str(tmp_path), "--frames", "3",
+                 "--json"]) == 0
+    onnx_eval = json.loads(capsys.readouterr().out)
+    assert onnx_eval["runtime"] == "onnx" and onnx_eval["frames"] == 3 and 0 <= onnx_eval["car_mAP"] <= 100
