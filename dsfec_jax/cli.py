@@ -68,6 +68,11 @@ def parse(argv=None) -> argparse.Namespace:
     ex.add_argument("--top-k", type=int, default=100, help="boxes per head kept by the in-graph decode")
     ex.add_argument("--max-pillars", type=int, default=RUN_PILLARS)
     ex.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
+    qz = sub.add_parser("quantize", help="static INT8 (onnxruntime) of an export, calibrated on synthetic frames")
+    qz.add_argument("--onnx", required=True, help="export directory (dsfec export)")
+    qz.add_argument("--out", required=True, help="directory for the INT8 model.onnx and deploy.json")
+    qz.add_argument("--calib-frames", type=int, default=64, help="synthetic train frames to calibrate on")
+    qz.add_argument("--seed", type=int, default=0)
     for name, split in (("eval", "test"), ("predict", "test")):
         q = sub.add_parser(name, help=f"{name} a zoo model")
         common(q, split)
@@ -200,6 +205,15 @@ def run_export(args) -> int:
     return 0
 
 
+def run_quantize(args) -> int:
+    from .data.sources import load_frames
+    from .deploy.quantize import quantize
+
+    out = quantize(args.onnx, args.out, load_frames("synthetic", "train", args.calib_frames, args.seed))
+    print(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in out.items()}, indent=2))
+    return 0
+
+
 def main(argv=None) -> int:
     args = parse(argv)
     if args.command == "train":
@@ -208,6 +222,8 @@ def main(argv=None) -> int:
         return run_ship(args)
     if args.command == "export":
         return run_export(args)
+    if args.command == "quantize":
+        return run_quantize(args)
     return run_eval_or_predict(args)
 
 

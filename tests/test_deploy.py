@@ -116,3 +116,20 @@ def test_export_command_writes_a_runnable_model_from_shipped_weights(tmp_path, c
                  "--json"]) == 0
     onnx_eval = json.loads(capsys.readouterr().out)
     assert onnx_eval["runtime"] == "onnx" and onnx_eval["frames"] == 3 and 0 <= onnx_eval["car_mAP"] <= 100
+
+
+def test_int8_quantization_is_smaller_and_still_detects(tmp_path, capsys):
+    from dsfec_jax.cli import main
+
+    det = tiny("dsfec_s")
+    export(det, realistic_variables(det, "dsfec_s"), tmp_path / "fp32", top_k=30)
+    assert main(["quantize", "--onnx", str(tmp_path / "fp32"), "--out", str(tmp_path / "int8"),
+                 "--calib-frames", "4"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["int8_bytes"] < 0.6 * out["fp32_bytes"]
+    import onnx
+    ops = {n.op_type for n in onnx.load(str(tmp_path / "int8" / "model.onnx")).graph.node}
+    assert {"QuantizeLinear", "DequantizeLinear"} <= ops
+    frame = load_frames("synthetic", "val", 1)[0]
+    fp32, int8 = OrtPredictor(tmp_path / "fp32", score_threshold=0.0)(frame), OrtPredictor(tmp_path / "int8", score_threshold=0.0)(frame)
+    assert len(int8.scores) > 0 and abs(float(int8.scores[0]) - float(fp32.scores[0])) < 0.1

@@ -1,0 +1,87 @@
+"""Static INT8 quantization of an exported detector with onnxruntime's tools, calibrated on
+frames (synthetic by default): `quantize(EXPORT_DIR, OUT_DIR, frames)`.
+
+Only the convolutions and matrix products are quantized (QDQ format, symmetric int8 weights
+per output channel, activations calibrated by min/max over the calibration frames); the
+scatter, the decode (sigmoid, exp, atan2, top-k) and everything after the last conv stay in
+float32, because an int8 box code would cost centimetres on every box.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .. import atomic
+from ..data.pillarize import pillarize, select_columns
+from .ort import pillar_spec, read_manifest
+
+QUANTIZED_OPS = ["Conv", "ConvTranspose", "MatMul", "Gemm"]
+
+
+def calibration_feeds(manifest: dict, frames) -> list[dict]:
+    spec = pillar_spec(manifest)
+    feeds = []
+    for frame in frames:
+        tensors, _ = pillarize(select_columns(frame, spec.features), spec)
+        feeds.append({k: tensors[k][None] for k in manifest["inputs"]})
+    return feeds
+
+
+def unfold_zeros(path: Path, min_bytes: int = 4096) -> None:
+    """Constant folding stores the scatter's all-zero canvas as a 1 MB initializer: put it back
+    as a ConstantOfShape node, so the INT8 file is not larger than the float one."""
+    import onnx
+    from onnx import helper, numpy_helper
+
+    model = onnx.load(str(path))
+    graph = model.graph
+    for init in list(graph.initializer):
+        a = numpy_helper.to_array(init)
+        if a.nbytes < min_bytes or a.dtype != np.float32 or a.any():
+            continue
+        shape = numpy_helper.from_array(np.array(a.shape, np.int64), init.name + "_shape")
+        graph.initializer.remove(init)
+        graph.initializer.append(shape)
+        value = helper.make_tensor("value", onnx.TensorProto.FLOAT, [1], [0.0])
+        graph.node.insert(0, helper.make_node("ConstantOfShape", [shape.name], [init.name], value=value))
+    onnx.save(model, str(path))
+
+
+def quantize(export_dir: str | Path, out_dir: str | Path, frames, per_channel: bool = True) -> dict:
+    """Write OUT_DIR/model.onnx (INT8 QDQ) and its deploy.json -> {'onnx', 'manifest', sizes}."""
+    from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+    from onnxruntime.quantization.shape_inference import quant_pre_process
+
+    model, manifest = read_manifest(export_dir)
+    if manifest["batch_size"] != 1:
+        raise ValueError(f"{model}: calibrate a batch-1 export (this one has batch {manifest['batch_size']})")
+    feeds = calibration_feeds(manifest, frames)
+    if not feeds:
+        raise ValueError("quantize: no calibration frames")
+
+    class Reader(CalibrationDataReader):
+        def __init__(self):
+            self.items = iter(feeds)
+
+        def get_next(self):
+            return next(self.items, None)
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        prepared, quantized = Path(tmp) / "prepared.onnx", Path(tmp) / "int8.onnx"
+        quant_pre_process(str(model), str(prepared), skip_symbolic_shape=True)  # folds weight transposes
+        unfold_zeros(prepared)
+        quantize_static(str(prepared), str(quantized), Reader(), quant_format=QuantFormat.QDQ,
+                        op_types_to_quantize=QUANTIZED_OPS, per_channel=per_channel,
+                        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8)
+        atomic.write_bytes(out_dir / "model.onnx", quantized.read_bytes())
+    sizes = {"fp32_bytes": model.stat().st_size, "int8_bytes": (out_dir / "model.onnx").stat().st_size}
+    info = {**manifest, "quantization": {"format": "QDQ", "weights": "int8 symmetric" + (" per channel" if per_channel else ""),
+                                         "activations": "uint8, min/max calibrated", "ops": QUANTIZED_OPS,
+                                         "calibration_frames": len(feeds), "source_export": str(model), **sizes}}
+    atomic.write_json(out_dir / "deploy.json", info)
+    return {"onnx": out_dir / "model.onnx", "manifest": out_dir / "deploy.json", **sizes}
