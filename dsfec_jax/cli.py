@@ -41,6 +41,11 @@ def common(p: argparse.ArgumentParser, split: str) -> None:
     p.add_argument("--max-pillars", type=int, default=RUN_PILLARS)
 
 
+def command_line(args) -> str:
+    """The command as the user typed it (or as a caller passed it to main), for manifests."""
+    return "dsfec " + " ".join(shlex.quote(a) for a in args.argv)
+
+
 def parse(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="dsfec", description="train, evaluate and run zoo detectors")
     sub = p.add_subparsers(dest="command", required=True)
@@ -73,6 +78,14 @@ def parse(argv=None) -> argparse.Namespace:
     qz.add_argument("--out", required=True, help="directory for the INT8 model.onnx and deploy.json")
     qz.add_argument("--calib-frames", type=int, default=64, help="synthetic train frames to calibrate on")
     qz.add_argument("--seed", type=int, default=0)
+    b = sub.add_parser("bench", help="batch-1 latency from raw points to boxes per stage, runtime and thread count")
+    b.add_argument("--models", default="baseline,dsfec_l,dsfec_m,dsfec_s")
+    b.add_argument("--runtimes", default="jax,onnx,onnx-int8")
+    b.add_argument("--threads", default="1", help="comma-separated thread counts, e.g. 1,2")
+    b.add_argument("--repeats", type=int, default=20)
+    b.add_argument("--warmup", type=int, default=3)
+    b.add_argument("--out", default=None, help="write bench.json, bench.md and bench.png here")
+    b.add_argument("--json", action="store_true", help="print the records as JSON")
     for name, split in (("eval", "test"), ("predict", "test")):
         q = sub.add_parser(name, help=f"{name} a zoo model")
         common(q, split)
@@ -86,7 +99,9 @@ def parse(argv=None) -> argparse.Namespace:
             q.add_argument("--out", required=True, help="nuScenes submission JSON to write")
             q.add_argument("--png-dir", default=None, help="also write a BEV PNG per frame here")
             q.add_argument("--gt-out", default=None, help="also write the frames' ground truth in the same format")
-    return p.parse_args(argv)
+    args = p.parse_args(argv)
+    args.argv = list(sys.argv[1:] if argv is None else argv)
+    return args
 
 
 def run_train(args) -> int:
@@ -98,7 +113,7 @@ def run_train(args) -> int:
     sched = get_schedule(args.schedule, **({"batch_size": args.batch_size} if args.batch_size else {}))
     frames = load_frames(args.data, args.split, args.frames or (sched.batch_size * 100), args.seed)
     val = load_frames(args.data, "val", args.val_frames, args.seed)
-    info = {"command": "dsfec " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+    info = {"command": command_line(args),
             "data": {"source": args.data, "split": args.split}}
     _, _, final = fit(args.model, overrides, frames, val, sched, args.run_dir, args.seed, args.steps,
                       args.window or None, not args.no_augment, args.eval_every, info)
@@ -181,7 +196,7 @@ def run_ship(args) -> int:
             "frames": args.frames, "data_seed": 0}
     manifest = {"model": args.model, "source_checkpoint": str(source),
                 "step": checkpoint.read_manifest(source).get("step"), "training": info,
-                "measured": measured, "ship_command": "dsfec " + " ".join(shlex.quote(a) for a in sys.argv[1:]),
+                "measured": measured, "ship_command": command_line(args),
                 "versions": versions()}
     out = Path(args.out_dir) / f"{args.model}.msgpack" if args.out_dir else zoo.shipped_weights(args.model)
     checkpoint.save(out, variables, manifest)
@@ -200,7 +215,7 @@ def run_export(args) -> int:
     variables = zoo.load_variables(det, path)
     variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
     out = export(det, variables, args.out, top_k=args.top_k,
-                 source={"weights": str(path), "command": "dsfec " + " ".join(shlex.quote(a) for a in sys.argv[1:])})
+                 source={"weights": str(path), "command": command_line(args)})
     print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))
     return 0
 
@@ -214,6 +229,30 @@ def run_quantize(args) -> int:
     return 0
 
 
+def run_bench(args) -> int:
+    from . import atomic, zoo
+    from .deploy import bench
+
+    models = [m for m in args.models.split(",") if m]
+    runtimes = [r for r in args.runtimes.split(",") if r]
+    bad = [m for m in models if m not in zoo.available()] + [r for r in runtimes if r not in bench.RUNTIMES]
+    if bad:
+        sys.exit(f"dsfec bench: unknown {bad}; models {zoo.available()}, runtimes {list(bench.RUNTIMES)}")
+    try:
+        threads = [int(t) for t in args.threads.split(",")]
+    except ValueError:
+        sys.exit(f"--threads {args.threads!r}: expected comma-separated integers")
+    records = bench.run(models, runtimes, threads, args.repeats, args.warmup)
+    table = bench.markdown(records)
+    if args.out:
+        command = command_line(args)
+        atomic.write_json(Path(args.out) / "bench.json", {"command": command, "records": records})
+        atomic.write_text(Path(args.out) / "bench.md", table + f"\nCommand: `{command}`\n")
+        bench.plot(records, Path(args.out) / "bench.png")
+    print(json.dumps(records, indent=2) if args.json else table)
+    return 0
+
+
 def main(argv=None) -> int:
     args = parse(argv)
     if args.command == "train":
@@ -224,6 +263,8 @@ def main(argv=None) -> int:
         return run_export(args)
     if args.command == "quantize":
         return run_quantize(args)
+    if args.command == "bench":
+        return run_bench(args)
     return run_eval_or_predict(args)
 
 

@@ -133,3 +133,21 @@ def test_int8_quantization_is_smaller_and_still_detects(tmp_path, capsys):
     frame = load_frames("synthetic", "val", 1)[0]
     fp32, int8 = OrtPredictor(tmp_path / "fp32", score_threshold=0.0)(frame), OrtPredictor(tmp_path / "int8", score_threshold=0.0)(frame)
     assert len(int8.scores) > 0 and abs(float(int8.scores[0]) - float(fp32.scores[0])) < 0.1
+
+
+def test_bench_times_every_stage_per_runtime_and_writes_reports(tmp_path, capsys):
+    from dsfec_jax.cli import main
+
+    assert main(["bench", "--models", "dsfec_s", "--runtimes", "jax,onnx", "--repeats", "2", "--warmup", "1",
+                 "--out", str(tmp_path), "--json"]) == 0
+    records = json.loads(capsys.readouterr().out)
+    assert [(r["model"], r["runtime"], r["threads"]) for r in records] == [("dsfec_s", "jax", 1), ("dsfec_s", "onnx", 1)]
+    for r in records:
+        assert set(r["stages_ms"]) == {"pillarize", "network", "decode", "nms"}
+        assert r["total_ms"] >= r["stages_ms"]["network"] > 0 and r["cpu"] and r["versions"]["onnxruntime"]
+    assert set(records[0]["throughput_fps"]) == {"1", "2", "4", "8"}
+    assert "JAX / ONNX Runtime (dsfec_s, 1 thread)" in (tmp_path / "bench.md").read_text()
+    assert (tmp_path / "bench.png").read_bytes()[:4] == b"\x89PNG"
+    assert json.loads((tmp_path / "bench.json").read_text())["command"].startswith("dsfec bench")
+    with pytest.raises(SystemExit, match="unknown"):
+        main(["bench", "--models", "dsfec_xl"])

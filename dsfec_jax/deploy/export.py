@@ -48,18 +48,24 @@ def grouped(detector):
     return zoo.Detector(dataclasses.replace(detector.config, depthwise_impl="grouped"))
 
 
+def onnx_model(fn, specs: list, input_names: list[str], output_names: list[str], name: str = "dsfec"):
+    """jax2onnx of a jittable fn -> ModelProto, stale shape annotations cleared."""
+    from jax2onnx import to_onnx
+
+    model = to_onnx(fn, specs, model_name=name, input_names=list(input_names), output_names=list(output_names))
+    del model.graph.value_info[:]  # stale shape annotations make onnxruntime log one error per layer
+    return model
+
+
 def export(detector, variables, out_dir: str | Path, top_k: int = 100, batch_size: int = 1,
            with_maps: bool = False, source: dict | None = None) -> dict:
     """Write model.onnx, model.jax_export and deploy.json to out_dir -> {name: path}."""
-    from jax2onnx import to_onnx
-
     out_dir = Path(out_dir)
     det = grouped(detector)
     fn = end_to_end(det, variables, top_k, with_maps)
     specs = [jax.ShapeDtypeStruct(v.shape, v.dtype) for v in (det.dummy_inputs(batch_size)[k] for k in INPUTS)]
     outputs = OUTPUTS + (MAP_OUTPUTS if with_maps else ())
-    model = to_onnx(fn, specs, model_name=det.name, input_names=list(INPUTS), output_names=list(outputs))
-    del model.graph.value_info[:]  # stale shape annotations make onnxruntime log one error per layer
+    model = onnx_model(fn, specs, INPUTS, outputs, det.name)
     atomic.write_bytes(out_dir / "model.onnx", model.SerializeToString())
     exported = jax.export.export(jax.jit(fn))(*specs)
     atomic.write_bytes(out_dir / "model.jax_export", exported.serialize())

@@ -50,15 +50,11 @@ def unfold_zeros(path: Path, min_bytes: int = 4096) -> None:
     onnx.save(model, str(path))
 
 
-def quantize(export_dir: str | Path, out_dir: str | Path, frames, per_channel: bool = True) -> dict:
-    """Write OUT_DIR/model.onnx (INT8 QDQ) and its deploy.json -> {'onnx', 'manifest', sizes}."""
+def quantize_model(src: str | Path, dst: str | Path, feeds: list[dict], per_channel: bool = True) -> None:
+    """INT8 QDQ copy of the ONNX model at src (any inputs) calibrated on `feeds`, written to dst."""
     from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
     from onnxruntime.quantization.shape_inference import quant_pre_process
 
-    model, manifest = read_manifest(export_dir)
-    if manifest["batch_size"] != 1:
-        raise ValueError(f"{model}: calibrate a batch-1 export (this one has batch {manifest['batch_size']})")
-    feeds = calibration_feeds(manifest, frames)
     if not feeds:
         raise ValueError("quantize: no calibration frames")
 
@@ -69,16 +65,26 @@ def quantize(export_dir: str | Path, out_dir: str | Path, frames, per_channel: b
         def get_next(self):
             return next(self.items, None)
 
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         prepared, quantized = Path(tmp) / "prepared.onnx", Path(tmp) / "int8.onnx"
-        quant_pre_process(str(model), str(prepared), skip_symbolic_shape=True)  # folds weight transposes
+        quant_pre_process(str(src), str(prepared), skip_symbolic_shape=True)  # folds weight transposes
         unfold_zeros(prepared)
+        # U8S8 (uint8 activations, int8 weights): ORT's scheme for x86; int8 activations fail to
+        # load in ORT 1.31 on jax2onnx's opset-23 graph (QuantizeLinear zero-point type mismatch)
         quantize_static(str(prepared), str(quantized), Reader(), quant_format=QuantFormat.QDQ,
                         op_types_to_quantize=QUANTIZED_OPS, per_channel=per_channel,
                         activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8)
-        atomic.write_bytes(out_dir / "model.onnx", quantized.read_bytes())
+        atomic.write_bytes(Path(dst), quantized.read_bytes())
+
+
+def quantize(export_dir: str | Path, out_dir: str | Path, frames, per_channel: bool = True) -> dict:
+    """Write OUT_DIR/model.onnx (INT8 QDQ) and its deploy.json -> {'onnx', 'manifest', sizes}."""
+    model, manifest = read_manifest(export_dir)
+    if manifest["batch_size"] != 1:
+        raise ValueError(f"{model}: calibrate a batch-1 export (this one has batch {manifest['batch_size']})")
+    feeds = calibration_feeds(manifest, frames)
+    out_dir = Path(out_dir)
+    quantize_model(model, out_dir / "model.onnx", feeds, per_channel)
     sizes = {"fp32_bytes": model.stat().st_size, "int8_bytes": (out_dir / "model.onnx").stat().st_size}
     info = {**manifest, "quantization": {"format": "QDQ", "weights": "int8 symmetric" + (" per channel" if per_channel else ""),
                                          "activations": "uint8, min/max calibrated", "ops": QUANTIZED_OPS,
