@@ -97,3 +97,20 @@ def test_train_mode_updates_batch_stats():
     assert set(updates) == {"batch_stats"}
     before, after = jax.tree.leaves(variables["batch_stats"]), jax.tree.leaves(updates["batch_stats"])
     assert any(not np.allclose(a, b) for a, b in zip(before, after))
+
+
+@pytest.mark.parametrize("path", sorted(zoo.WEIGHTS_DIR.glob("*.msgpack")), ids=lambda p: p.stem)
+def test_every_shipped_weights_file_loads_and_records_how_it_was_made(path):
+    import json
+
+    from conftest import TINY_GRID
+
+    manifest = json.loads(path.with_name(path.name + ".json").read_text())
+    assert manifest["model"] == path.stem and manifest["training"]["command"].startswith("dsfec train")
+    assert manifest["training"]["seed"] == 0 and manifest["versions"]["jax"]
+    assert 0 < manifest["measured"]["test"]["car_mAP"] <= 100
+    predictor = zoo.load(path.stem, grid=TINY_GRID, max_pillars=96)  # weights fit any grid
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(0, 16, 50), rng.uniform(-8, 8, 50), rng.normal(0, 1, (50, 5))])
+    out = predictor(points.astype(np.float32))
+    assert len(out.boxes) == len(out.scores) and np.isfinite(out.scores).all()
