@@ -78,6 +78,8 @@ def parse(argv=None) -> argparse.Namespace:
     qz.add_argument("--out", required=True, help="directory for the INT8 model.onnx and deploy.json")
     qz.add_argument("--calib-frames", type=int, default=64, help="synthetic train frames to calibrate on")
     qz.add_argument("--seed", type=int, default=0)
+    qz.add_argument("--calibration", default="minmax", choices=("minmax", "percentile", "entropy"),
+                    help="how activation ranges are set from the calibration frames")
     b = sub.add_parser("bench", help="batch-1 latency from raw points to boxes per stage, runtime and thread count")
     b.add_argument("--models", default="baseline,dsfec_l,dsfec_m,dsfec_s")
     b.add_argument("--runtimes", default="jax,onnx,onnx-int8")
@@ -224,7 +226,8 @@ def run_quantize(args) -> int:
     from .data.sources import load_frames
     from .deploy.quantize import quantize
 
-    out = quantize(args.onnx, args.out, load_frames("synthetic", "train", args.calib_frames, args.seed))
+    out = quantize(args.onnx, args.out, load_frames("synthetic", "train", args.calib_frames, args.seed),
+                   calibration=args.calibration)
     print(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in out.items()}, indent=2))
     return 0
 

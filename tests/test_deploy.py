@@ -151,3 +151,10 @@ def test_bench_times_every_stage_per_runtime_and_writes_reports(tmp_path, capsys
     assert json.loads((tmp_path / "bench.json").read_text())["command"].startswith("dsfec bench")
     with pytest.raises(SystemExit, match="unknown"):
         main(["bench", "--models", "dsfec_xl"])
+
+
+def test_quantize_refuses_an_unknown_calibration(tmp_path):
+    from dsfec_jax.deploy.quantize import quantize_model
+
+    with pytest.raises(ValueError, match="calibration 'median'"):
+        quantize_model(tmp_path / "in.onnx", tmp_path / "out.onnx", [{"points": None}], calibration="median")
