@@ -20,15 +20,11 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from ..profile.environment import xla_thread_flags
+
 RUNTIMES = ("jax", "onnx", "onnx-int8")
 STAGES = ("pillarize", "network", "decode", "nms")
-RUN_PILLARS = 2048  # as dsfec_jax.cli: run-time pillar slots
 JAX_BATCHES = (1, 2, 4, 8)
-
-
-def xla_flags(threads: int) -> str:
-    flag = "--xla_cpu_multi_thread_eigen=false" if threads == 1 else f"intra_op_parallelism_threads={threads}"
-    return (os.environ.get("XLA_FLAGS", "") + " " + flag).strip()
 
 
 def model_setup(name: str):
@@ -37,6 +33,8 @@ def model_setup(name: str):
     from ..data.pillarize import select_columns
     from ..data.sources import load_frames
     from ..predict import Predictor
+
+    from ..cli import RUN_PILLARS
 
     det = zoo.create(name, max_pillars=RUN_PILLARS)
     shipped = zoo.shipped_weights(name)
@@ -214,7 +212,7 @@ def run(models: list[str], runtimes: list[str], threads: list[int], repeats: int
             cmd = [sys.executable, "-m", "dsfec_jax.deploy.bench", "--models", ",".join(models),
                    "--runtimes", ",".join(runtimes), "--threads", str(t), "--repeats", str(repeats),
                    "--warmup", str(warmup), "--records-out", str(out)]
-            env = {**os.environ, "XLA_FLAGS": xla_flags(t), "OMP_NUM_THREADS": str(t)}
+            env = {**os.environ, "XLA_FLAGS": xla_thread_flags(t), "OMP_NUM_THREADS": str(t)}
             proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
             if proc.returncode != 0:
                 raise RuntimeError(f"bench worker (threads={t}) failed:\n{proc.stderr[-3000:]}")

@@ -30,8 +30,9 @@ def parse(argv=None) -> argparse.Namespace:
 def set_threads(threads: int | None) -> None:
     if threads is None:
         return
-    flag = "--xla_cpu_multi_thread_eigen=false" if threads == 1 else f"intra_op_parallelism_threads={threads}"
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " " + flag).strip()
+    from .environment import xla_thread_flags  # no jax import: safe before jax starts
+
+    os.environ["XLA_FLAGS"] = xla_thread_flags(threads)
 
 
 def human(records: list[dict]) -> str:

@@ -19,6 +19,12 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
+def xla_thread_flags(threads: int) -> str:
+    """XLA_FLAGS with the CPU backend limited to `threads` intra-op threads (read at start-up)."""
+    flag = "--xla_cpu_multi_thread_eigen=false" if threads == 1 else f"intra_op_parallelism_threads={threads}"
+    return (os.environ.get("XLA_FLAGS", "") + " " + flag).strip()
+
+
 def xla_threads() -> int:
     """Intra-op threads XLA's CPU backend uses (1 when multi-threaded Eigen is switched off)."""
     flags = os.environ.get("XLA_FLAGS", "")
