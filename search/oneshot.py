@@ -36,7 +36,9 @@ from dsfec_jax.profile.records import profile
 from dsfec_jax.train.losses import LossConfig, detection_loss
 from dsfec_jax.train.schedules import optimizer
 from dsfec_jax.train.step import init_state
+from dsfec_jax.train.warm_start import warm_start
 
+from .inherit import initial_variables
 from .journal import Journal
 from .recipes import get_recipe
 from .space import SearchSpaceError
@@ -90,6 +92,18 @@ def supernet_step(supernet, tx, loss_cfg: LossConfig):
     return jax.jit(step, donate_argnums=0)
 
 
+class SubnetPredictor(Predictor):
+    """The supernet's predictor run as the subnet of `depth` (a traced input, so one compile
+    evaluates every candidate); set `.variables` and `.depth` between candidates."""
+
+    def __init__(self, supernet, variables, depth, **options):
+        super().__init__(supernet, variables, **options)
+        self.depth = depth
+
+    def run(self, batch: dict):
+        return jax.device_get(self.network(self.variables, {**batch, "depth": self.depth}))
+
+
 def module_keys(detector) -> tuple[str, ...]:
     return tuple(jax.eval_shape(detector.init, jax.random.key(0))["params"])
 
@@ -141,19 +155,20 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
     depths = [jnp.asarray(s.config.stage_blocks, jnp.int32) for s in subs]
     steps = recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
     state, supernet_s, supernet_cpu = _supernet(supernet, stream, depths, recipe, steps, seed,
-                                  journal.path.parent / supernet_file(trials), log)
+                                                journal.path.parent / supernet_file(trials), log,
+                                                initial_variables(trials[0].get("init", "scratch")))
     recalibrate = recalibrator(supernet)
     calib = [collate([frames[j] for j in stream.indices(s)], PillarSpec.of(cfg), heads, cfg.output_stride)
              for s in range(CALIBRATION_BATCHES)]
     val = load_frames(data, "val", recipe.val_frames, seed=0)
-    for trial, sub, depth in zip(trials, subs, depths):
+    predictor = SubnetPredictor(supernet, None, depths[0])
+    for trial, depth in zip(trials, depths):
         if trial["key"] not in todo:
             continue
         t1, c1 = time.perf_counter(), time.process_time()
-        keys = module_keys(sub)
         stats = recalibrate({"params": state["params"], "batch_stats": state["batch_stats"]}, calib, depth)
-        variables = {"params": subset(state["params"], keys), "batch_stats": subset(stats, keys)}
-        result = evaluate(Predictor(sub, variables), val)
+        predictor.variables, predictor.depth = {"params": state["params"], "batch_stats": stats}, depth
+        result = evaluate(predictor, val)
         costs = profile([zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats,
                         warmup=1, light=recipe.light_profile)[0]
         metrics = {kk: result[kk] for kk in ("car_mAP", "car_AP4", "mAP")}
@@ -174,8 +189,9 @@ def supernet_file(trials: list[dict]) -> str:
     return f"supernet_{ident}.msgpack"
 
 
-def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, path: Path, log):
-    """Train the supernet (or read the one an interrupted run saved) -> (state, wall s, CPU s)."""
+def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, path: Path, log, init=None):
+    """Train the supernet (or read the one an interrupted run saved) -> (state, wall s, CPU s).
+    `init`: trained variables to start from (search.inherit), else a fresh initialisation."""
     tx = optimizer(recipe.schedule, steps)
     if path.is_file():
         manifest = checkpoint.read_manifest(path)
@@ -184,6 +200,8 @@ def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, pat
         return state, manifest["wall_s"], manifest["cpu_s"]
     t0, c0 = time.perf_counter(), time.process_time()
     state = init_state(supernet, tx, jax.random.key(seed))
+    if init is not None:
+        state = {**state, **warm_start(state, init)[0]}
     step_fn = supernet_step(supernet, tx, LossConfig())
     for step in range(steps):
         round_, pos = divmod(step, len(depths))

@@ -27,6 +27,7 @@ class Recipe:
     latency_repeats: int
     supernet_steps: int | None  # --strategy oneshot: steps of the one supernet, shared by all candidates
     light_profile: bool        # analytic sizes + whole-network latency only (one compile per candidate)
+    warm_start: bool = False   # depth sweeps start from the base's shipped weights (search.inherit)
 
     def model_overrides(self) -> dict:
         out = {"max_pillars": self.max_pillars}

@@ -84,6 +84,10 @@ def provenance(records: list[dict], meta: dict) -> str:
         sn = [json.loads(n) for n in nets]
         line += "; supernet " + ", ".join(f"{tuple(n['stage_blocks'])} trained {n['steps']} steps in {n['wall_s']:.0f} s"
                                           for n in sn)
+    inits = sorted({r.get("init", "scratch") for r in records})
+    line += "; started from " + ", ".join("scratch" if i == "scratch" else f"the shipped `{i}` (elastic depth: each "
+                                          "candidate keeps the first k blocks; favours the base's depth)"
+                                          for i in inits)
     line += f"; {len(records)} trial records, {wall / 60:.1f} min of trial wall time."
     return "\n" + line + "\n" + (f"\nCommand: `{meta['command']}`\n" if meta.get("command") else "")
 

@@ -14,6 +14,7 @@ from dsfec_jax.profile.environment import environment
 from dsfec_jax.profile.records import profile
 from dsfec_jax.train.fit import fit, jsonable
 
+from .inherit import describe, initial_variables, source_weights
 from .recipes import get_recipe
 
 
@@ -22,12 +23,15 @@ def trial_key(spec: dict) -> str:
     ident = {k: spec[k] for k in ("base", "overrides", "recipe", "data", "seed")}
     if spec.get("strategy", "train") != "train":  # keeps the keys of earlier train-strategy journals
         ident["strategy"] = spec["strategy"]
+    if spec.get("init", "scratch") != "scratch":
+        ident["init"] = spec["init"]
     return hashlib.sha1(json.dumps(jsonable(ident), sort_keys=True).encode()).hexdigest()[:12]
 
 
 def make_trial(base: str, candidate: dict, recipe: str, data: str, seed: int, strategy: str = "train") -> dict:
+    init = describe(source_weights(base, candidate["overrides"], recipe))
     spec = {"base": base, "label": candidate["label"], "overrides": candidate["overrides"], "recipe": recipe,
-            "data": data, "seed": seed, "strategy": strategy}
+            "data": data, "seed": seed, "strategy": strategy, "init": init}
     return {**spec, "key": trial_key(spec)}
 
 
@@ -53,7 +57,8 @@ def measure(trial: dict, trial_dir: Path) -> dict:
     frames = load_frames(trial["data"], "train", recipe.train_frames, seed=0)
     val = load_frames(trial["data"], "val", recipe.val_frames, seed=0)
     _, _, scores = fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
-                       window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False)
+                       window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
+                       init_variables=initial_variables(trial.get("init", "scratch")))
     costs = profile([zoo.create(trial["base"], **trial["overrides"])], timing=True,
                     repeats=recipe.latency_repeats, warmup=1, light=recipe.light_profile)[0]
     return {"metrics": scores,

@@ -240,3 +240,47 @@ def test_kendall_tau_and_compare(tmp_path, monkeypatch):
     stem.main(["--values", "32,16,12", "--out", str(tmp_path / "b"), "--seeds", "1"])
     result = compare(str(tmp_path / "a"), str(tmp_path / "b"))
     assert result["kendall_tau"] == 1.0 and len(result["candidates"]) == 3
+
+
+def test_warm_start_copies_matching_modules_and_keeps_deeper_blocks_fresh():
+    import jax
+    import numpy as np
+    from dsfec_jax.train.warm_start import warm_start
+
+    trained = tiny("dsfec_l", stage_blocks=(1, 2, 1, 1)).init(jax.random.key(7))
+    fresh = tiny("dsfec_l", stage_blocks=(1, 3, 1, 1)).init(jax.random.key(1))
+    merged, how = warm_start(fresh, trained)
+    assert "stage2_block1" in how["copied"] and how["fresh"] == ["stage2_block2"]
+    for k in ("stem0", "stage2_block1"):
+        for a, b in zip(jax.tree.leaves(merged["params"][k]), jax.tree.leaves(trained["params"][k])):
+            np.testing.assert_array_equal(a, b)
+    for a, b in zip(jax.tree.leaves(merged["params"]["stage2_block2"]), jax.tree.leaves(fresh["params"]["stage2_block2"])):
+        np.testing.assert_array_equal(a, b)
+    # a module whose shapes changed (narrower stem) is not copied
+    narrow = tiny("dsfec_l", stage_blocks=(1, 2, 1, 1), stem_filters=16, fec_filters=(32, 128, 16)).init(jax.random.key(1))
+    assert "stem0" in warm_start(narrow, trained)[1]["fresh"]
+
+
+def test_quick_depth_sweep_starts_from_the_shipped_weights(tiny_search, tmp_path, monkeypatch):
+    import dataclasses
+    import jax
+    from dsfec_jax import checkpoint
+
+    weights = tmp_path / "weights"
+    monkeypatch.setattr(zoo, "WEIGHTS_DIR", weights)
+    checkpoint.save(weights / f"{tiny_search}.msgpack", zoo.create(tiny_search).init(jax.random.key(3)), {})
+    monkeypatch.setitem(recipes.RECIPES, "quick", dataclasses.replace(recipes.RECIPES["quick"], warm_start=True))
+    depth = trial.make_trial(tiny_search, {"label": "a", "overrides": {"stage_blocks": (1, 1, 1, 1)}}, "quick", "synthetic", 0)
+    stem_axis = trial.make_trial(tiny_search, {"label": "b", "overrides": {"stem_filters": 16}}, "quick", "synthetic", 0)
+    assert depth["init"].startswith(f"{tiny_search}.msgpack@") and stem_axis["init"] == "scratch"
+    out = tmp_path / "warm"
+    assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "oneshot",
+                        "--out", str(out)]) == 0
+    records = Journal(out).records()
+    assert [r["status"] for r in records] == ["ok", "ok"] and all(r["init"] == depth["init"] for r in records)
+    assert "started from the shipped" in (out / "report.md").read_text()
+    # the weights changed after the sweep was planned: the trial fails with a clear error
+    checkpoint.save(weights / f"{tiny_search}.msgpack", zoo.create(tiny_search).init(jax.random.key(4)), {})
+    from search.inherit import initial_variables
+    with pytest.raises(ValueError, match="planned from"):
+        initial_variables(depth["init"])

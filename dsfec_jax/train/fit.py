@@ -32,8 +32,9 @@ def state_variables(state: dict) -> dict:
 def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Frame], schedule: Schedule,
         run_dir: str | Path, seed: int = 0, steps: int | None = None, window: int | None = 96,
         augment: bool = True, eval_every: int | None = 200, run_info: dict | None = None,
-        progress: bool = True) -> tuple[zoo.Detector, dict, dict]:
-    """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val headline)."""
+        progress: bool = True, init_variables: dict | None = None) -> tuple[zoo.Detector, dict, dict]:
+    """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val headline).
+    `init_variables`: start from these trained variables where modules match (train.warm_start)."""
     det = zoo.create(model, **overrides)
     cfg = det.config
     windows = [zoo.create(model, **{**overrides, "grid": g}) for g in training_windows(cfg.grid, window)]
@@ -51,5 +52,6 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
         m = result.pop("metrics")
         return {**result, "class_mAP": m["class_mAP"], "AP@4": m.get("AP@4", {})}
 
-    state, scores = train(det, stream, spec, info, validate, eval_every or total, window_detectors=windows)
+    state, scores = train(det, stream, spec, info, validate, eval_every or total, window_detectors=windows,
+                          init_variables=init_variables)
     return det, state, scores if scores is not None else validate(state)

@@ -25,6 +25,7 @@ from ..data.batches import BatchStream
 from .losses import LossConfig
 from .schedules import Schedule, optimizer
 from .step import init_state, make_train_step
+from .warm_start import warm_start
 
 
 class TrainingDiverged(RuntimeError):
@@ -71,14 +72,20 @@ def _save(spec: RunSpec, state: dict, step: int, extra: dict) -> None:
 
 def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
           evaluate: Callable[[dict], dict] | None = None, eval_every: int | None = None,
-          best_key: str = "car_mAP", window_detectors: list | None = None) -> tuple[dict, dict | None]:
+          best_key: str = "car_mAP", window_detectors: list | None = None,
+          init_variables: dict | None = None) -> tuple[dict, dict | None]:
     """Train (or resume) in spec.run_dir -> (final state, last evaluation or None).
     `evaluate(state) -> metrics` runs every `eval_every` steps and at the end.
-    `window_detectors[i]` (same weights, grid = the stream's window i) trains on window i."""
+    `window_detectors[i]` (same weights, grid = the stream's window i) trains on window i.
+    `init_variables` (trained variables of this or a related network) seed a fresh run module by
+    module (see warm_start); a resumed run ignores them."""
     spec.run_dir.mkdir(parents=True, exist_ok=True)
     atomic.write_json(spec.run_dir / "run.json", run_info)
     tx = optimizer(spec.schedule, spec.total_steps)
-    state = _restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed)))
+    state = init_state(detector, tx, jax.random.key(spec.seed))
+    if init_variables is not None:
+        state = {**state, **warm_start(state, init_variables)[0]}
+    state = _restore(spec.run_dir, state)
     start = int(state["step"])
     log_path = spec.run_dir / "metrics.jsonl"
     _trim_metrics(log_path, start)

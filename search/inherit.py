@@ -1,0 +1,46 @@
+"""Which trained weights a candidate starts from.
+
+A recipe with `warm_start` starts every candidate of a *depth* sweep (overrides = stage_blocks
+only) from the base model's shipped weights: the candidate keeps the first k blocks of each
+stage (Once-for-All's elastic depth), then trains with the recipe. This is what lets a 2-core
+`quick` profile rank DSFEC-L depths at all: from scratch, 150-500 CPU steps leave DSFEC-L at
+noise-level mAP. The price is a bias toward the base's own depth (it starts as the exact
+trained network); it is named in every record (`init`) and report. Other axes (stem filters,
+activations) change what the trained weights mean, so they always train from scratch.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+from dsfec_jax import checkpoint, zoo
+
+from .recipes import get_recipe
+
+
+def source_weights(base: str, overrides: dict, recipe: str) -> Path | None:
+    """The weights file a trial of this (base, overrides, recipe) starts from, or None (scratch)."""
+    path = zoo.shipped_weights(base)
+    if not get_recipe(recipe).warm_start or set(overrides) - {"stage_blocks"} or not path.is_file():
+        return None
+    return path
+
+
+def describe(path: Path | None) -> str:
+    """'scratch' or 'NAME.msgpack@SHA256[:12]': part of a trial's identity and of its record."""
+    if path is None:
+        return "scratch"
+    return f"{path.name}@{hashlib.sha256(path.read_bytes()).hexdigest()[:12]}"
+
+
+def initial_variables(init: str) -> dict | None:
+    """The variables a record's `init` names (None for scratch); the file must still match."""
+    if init == "scratch":
+        return None
+    name = init.split("@")[0]
+    path = zoo.WEIGHTS_DIR / name
+    if describe(path) != init:
+        raise ValueError(f"{path}: the trial was planned from {init}, the file on disk is {describe(path)}; "
+                         "use a new --out RUN_DIR for the new weights")
+    return checkpoint.load(path)
