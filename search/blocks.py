@@ -2,7 +2,8 @@
 
 A depth axis is what weight sharing fits, so the default strategy here is one-shot: one
 supernet trains for the recipe's budget and every candidate inherits its weights
-(`--strategy train` trains each candidate from scratch).
+(`--strategy train` trains each candidate; in the quick profile both start from the
+base's shipped weights, see search.inherit).
 """
 
 from __future__ import annotations

@@ -3,6 +3,7 @@ python -m search.compare RUN_TRAIN RUN_ONESHOT  (Kendall tau of the Car-mAP rank
 
 from __future__ import annotations
 
+import itertools
 import json
 import sys
 
@@ -30,6 +31,16 @@ def kendall_tau(a: list[float], b: list[float]) -> float:
     return (conc - disc) / denom if denom else float("nan")
 
 
+def tau_p_value(a: list[float], b: list[float], max_n: int = 8) -> float | None:
+    """Exact one-sided permutation p-value of tau >= the observed tau (no rank agreement as the
+    null); None past max_n candidates. With 6 candidates only tau >= 0.73 has p < 0.05."""
+    if len(a) > max_n:
+        return None
+    observed = kendall_tau(a, b)
+    taus = [kendall_tau(a, [b[i] for i in perm]) for perm in itertools.permutations(range(len(b)))]
+    return sum(t >= observed - 1e-12 for t in taus) / len(taus)
+
+
 def compare(run_a: str, run_b: str) -> dict:
     ra = {r["label"]: r for r in rows(Journal(run_a).records())}
     rb = {r["label"]: r for r in rows(Journal(run_b).records())}
@@ -41,6 +52,7 @@ def compare(run_a: str, run_b: str) -> dict:
 
     out = {"candidates": labels, "kendall_tau": kendall_tau([ra[x]["car_mAP"] for x in labels],
                                                             [rb[x]["car_mAP"] for x in labels]),
+           "p_value": tau_p_value([ra[x]["car_mAP"] for x in labels], [rb[x]["car_mAP"] for x in labels]),
            "car_mAP": {x: [ra[x]["car_mAP"], rb[x]["car_mAP"]] for x in labels}}
     for key in ("wall_s", "cpu_s"):  # CPU seconds are the fairer cost when the machine is shared
         a, b = cost(run_a, key), cost(run_b, key)

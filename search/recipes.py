@@ -1,8 +1,9 @@
 """How much each trial trains and where it is measured.
 
 `smoke` checks the whole pipeline in about a minute per trial (8 m x 8 m grid, 2 steps); its
-numbers mean nothing. `quick` ranks candidates on a 2-core CPU: a 32 m x 32 m grid in front of the sensor (64 x 64
-cells), 150 steps of batch 4 and 60 validation frames. `paper` trains on the whole grid with the
+numbers mean nothing. `quick` ranks candidates on a 2-core CPU: a 32 m x 32 m grid in front of
+the sensor (64 x 64 cells), 150 steps of batch 4 per trial (240 for a whole one-shot supernet)
+and 100 validation frames; depth sweeps start from the base's shipped weights (search.inherit). `paper` trains on the whole grid with the
 paper's schedule. Sizes and latency are always profiled on the model's own (full) grid, so the
 cost columns are comparable with the paper whatever the recipe.
 """
@@ -42,8 +43,8 @@ SMOKE_GRID = Grid((0.0, 8.0), (-4.0, 4.0), DSFEC_GRID.z_range, DSFEC_GRID.cell)
 RECIPES = {
     "smoke": Recipe("smoke", get_schedule("quick", steps=2, batch_size=2, warmup_steps=1), 4, 2, SMOKE_GRID, 64, None, 1,
                     supernet_steps=4, light_profile=True),
-    "quick": Recipe("quick", get_schedule("quick", steps=150, batch_size=4, warmup_steps=15), 400, 60,
-                    NEAR_GRID, 512, None, 5, supernet_steps=480, light_profile=True),
+    "quick": Recipe("quick", get_schedule("quick", steps=150, batch_size=4, warmup_steps=15), 400, 100,
+                    NEAR_GRID, 512, None, 20, supernet_steps=240, light_profile=True, warm_start=True),
     "paper": Recipe("paper", get_schedule("paper"), 4800, 500, None, 2048, None, 20,
                     supernet_steps=None, light_profile=False),
 }

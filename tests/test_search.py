@@ -235,11 +235,16 @@ def test_kendall_tau_and_compare(tmp_path, monkeypatch):
     assert kendall_tau([1, 2, 3, 4], [10, 20, 30, 40]) == 1.0
     assert kendall_tau([1, 2, 3, 4], [4, 3, 2, 1]) == -1.0
     assert kendall_tau([1, 2, 3], [1, 3, 2]) == pytest.approx(1 / 3)
+    from search.compare import tau_p_value
+    assert tau_p_value([1, 2, 3, 4, 5, 6], [1, 2, 3, 4, 5, 6]) == pytest.approx(1 / 720)  # one perfect order
+    assert tau_p_value([1, 2, 3, 4, 5, 6], [1, 2, 3, 4, 6, 5]) == pytest.approx(6 / 720)  # tau 0.87: 1 + 5 swaps
+    assert tau_p_value([1, 2, 3], [3, 2, 1]) == 1.0
     monkeypatch.setattr(trial, "measure", fake_measure([]))
     stem.main(["--values", "32,16,12", "--out", str(tmp_path / "a")])
     stem.main(["--values", "32,16,12", "--out", str(tmp_path / "b"), "--seeds", "1"])
     result = compare(str(tmp_path / "a"), str(tmp_path / "b"))
     assert result["kendall_tau"] == 1.0 and len(result["candidates"]) == 3
+    assert result["p_value"] == pytest.approx(1 / 6)  # 3 candidates: 1 of 3! orders agrees fully
 
 
 def test_warm_start_copies_matching_modules_and_keeps_deeper_blocks_fresh():
