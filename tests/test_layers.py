@@ -85,3 +85,36 @@ def test_residual_bottleneck_projects_when_shape_changes():
     assert block.apply(variables, x).shape == (1, 4, 4, 32)
     same = ResidualBottleneck(16, stride=1).init(jax.random.key(0), x)
     assert "proj" not in same["params"]
+
+
+@pytest.mark.parametrize("cin,features,kernel,stride,depthwise,branches,size", [
+    (8, 8, 3, 1, True, 1, 9),    # depthwise, stride 1: conv + scale + identity (3 branches)
+    (8, 8, 3, 2, True, 1, 10),   # depthwise, stride 2, even size: conv + scale (2 branches)
+    (8, 8, 3, 2, True, 2, 9),    # k = 2 conv branches, odd size
+    (8, 8, 1, 1, False, 1, 8),   # pointwise, C_in == C_out: conv + identity
+    (8, 16, 1, 1, False, 1, 8),  # pointwise widening: conv only
+    (8, 16, 3, 2, False, 3, 7),  # dense 3x3, k = 3
+])
+def test_mobileone_fused_equals_unfused(cin, features, kernel, stride, depthwise, branches, size):
+    import jax
+    import numpy as np
+    from dsfec_jax.layers.mobileone import MobileOneBlock, reparameterize_block
+
+    x = jax.random.normal(jax.random.key(0), (2, size, size, cin))
+    block = MobileOneBlock(features, kernel, stride, depthwise, branches)
+    variables = block.init(jax.random.key(1), x)
+    rng = np.random.default_rng(2)  # non-trivial running statistics, as after training
+    stats = jax.tree_util.tree_map_with_path(
+        lambda p, v: rng.uniform(0.5, 2.0, v.shape) if p[-1].key == "var" else rng.normal(0, 0.5, v.shape),
+        variables["batch_stats"])
+    params = jax.tree.map(lambda v: v + rng.normal(0, 0.1, v.shape), variables["params"])  # BN beta != 0
+    unfused = block.apply({"params": params, "batch_stats": stats}, x)
+    deploy = MobileOneBlock(features, kernel, stride, depthwise, branches, deploy=True)
+    fused_vars = reparameterize_block(block, cin, params, stats)
+    fused = deploy.apply(fused_vars, x)
+    assert fused.shape == unfused.shape == (2, -(-size // stride), -(-size // stride), features)
+    np.testing.assert_allclose(fused, unfused, atol=1e-5, rtol=1e-5)
+    grouped = MobileOneBlock(features, kernel, stride, depthwise, branches, deploy=True, depthwise_impl="grouped")
+    np.testing.assert_allclose(grouped.apply(fused_vars, x), fused, atol=1e-5)
+    n_branches = len([k for k in variables["batch_stats"]])
+    assert n_branches == branches + (kernel > 1) + (cin == features and stride == 1)

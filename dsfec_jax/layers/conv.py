@@ -78,13 +78,14 @@ class DepthwiseConv(nn.Module):
         return math.prod(out_shape[:-1]) * self.kernel**2 * out_shape[-1]
 
 
-def shifted_depthwise(x_BxHxWxC, w_KxKxC, stride: int):
-    """Depthwise conv as K*K multiply-adds of shifted views of the padded input."""
+def shifted_depthwise(x_BxHxWxC, w_KxKxC, stride: int, pads: tuple[int, int] | None = None):
+    """Depthwise conv as K*K multiply-adds of shifted views of the padded input. `pads`
+    (low, high) on both axes; default TF 'SAME'."""
     k = w_KxKxC.shape[0]
     _, h, w, _ = x_BxHxWxC.shape
-    ph, pw = same_pads(h, k, stride), same_pads(w, k, stride)
+    ph, pw = (same_pads(h, k, stride), same_pads(w, k, stride)) if pads is None else (pads, pads)
     xp = jnp.pad(x_BxHxWxC, ((0, 0), ph, pw, (0, 0)))
-    ho, wo = -(-h // stride), -(-w // stride)
+    ho, wo = (h + sum(ph) - k) // stride + 1, (w + sum(pw) - k) // stride + 1
     out = None
     for i in range(k):
         for j in range(k):
