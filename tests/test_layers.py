@@ -118,3 +118,57 @@ def test_mobileone_fused_equals_unfused(cin, features, kernel, stride, depthwise
     np.testing.assert_allclose(grouped.apply(fused_vars, x), fused, atol=1e-5)
     n_branches = len([k for k in variables["batch_stats"]])
     assert n_branches == branches + (kernel > 1) + (cin == features and stride == 1)
+
+
+def _bilinear_reference(img_HxWxC, y: float, x: float):
+    """Zeros outside the map: the grid_sample(padding_mode='zeros') convention DCNv3 uses."""
+    import math as m
+    h, w, _ = img_HxWxC.shape
+    acc = np.zeros(img_HxWxC.shape[-1])
+    for yy in (m.floor(y), m.floor(y) + 1):
+        for xx in (m.floor(x), m.floor(x) + 1):
+            if 0 <= yy < h and 0 <= xx < w:
+                acc += (1 - abs(y - yy)) * (1 - abs(x - xx)) * img_HxWxC[yy, xx]
+    return acc
+
+
+def test_dcnv3_sampling_matches_a_per_point_reference():
+    from dsfec_jax.layers.dcnv3 import deformable_sample
+
+    rng = np.random.default_rng(0)
+    b, h, w, g, c, s = 2, 5, 6, 2, 3, 2.0
+    value = rng.normal(size=(b, h, w, g, c)).astype(np.float32)
+    offset = rng.normal(0, 1.5, size=(b, h, w, g, 9, 2)).astype(np.float32)  # many taps fall outside
+    mask = rng.dirichlet(np.ones(9), size=(b, h, w, g)).astype(np.float32)
+    ref = np.zeros((b, h, w, g, c))
+    for bi in range(b):
+        for i in range(h):
+            for j in range(w):
+                for gi in range(g):
+                    for p in range(9):
+                        kx, ky = p // 3 - 1, p % 3 - 1  # x-major point order
+                        xs = j + s * (kx + offset[bi, i, j, gi, p, 0])
+                        ys = i + s * (ky + offset[bi, i, j, gi, p, 1])
+                        ref[bi, i, j, gi] += mask[bi, i, j, gi, p] * _bilinear_reference(value[bi, :, :, gi], ys, xs)
+    out = np.asarray(deformable_sample(value, offset, mask, s))
+    np.testing.assert_allclose(out, ref.reshape(b, h, w, g * c), atol=1e-5)
+    # zero offsets and all weight on the centre point read the map itself
+    centre = np.zeros_like(mask)
+    centre[..., 4] = 1.0
+    np.testing.assert_allclose(deformable_sample(value, np.zeros_like(offset), centre, s),
+                               value.reshape(b, h, w, g * c), atol=1e-6)
+
+
+def test_dcnv3_layer_shapes_and_zero_initialised_offsets():
+    import jax
+    from dsfec_jax.layers.dcnv3 import DCNv3
+
+    x = jax.random.normal(jax.random.key(0), (1, 8, 8, 16))
+    layer = DCNv3(16, groups=4)
+    variables = layer.init(jax.random.key(1), x)
+    assert layer.apply(variables, x).shape == (1, 8, 8, 16)
+    assert not np.any(variables["params"]["offset"]["kernel"]) and not np.any(variables["params"]["mask"]["kernel"])
+    grads = jax.grad(lambda v: layer.apply(v, x).sum())(variables)
+    assert np.any(grads["params"]["offset"]["kernel"])  # offsets learn through the bilinear weights
+    with pytest.raises(ValueError, match="multiple of groups"):
+        DCNv3(18, groups=4).init(jax.random.key(1), jax.numpy.zeros((1, 4, 4, 18)))
