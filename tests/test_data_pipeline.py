@@ -134,3 +134,25 @@ def test_point_dropout_drops_about_the_rate():
                   np.random.default_rng(0))
     assert 0.3 * len(frame.points) < len(out.points) < 0.7 * len(frame.points)
     assert len(out.boxes) == len(frame.boxes)
+
+
+def test_centerpoint_radius_and_gaussian_heatmap():
+    import math
+    from dsfec_jax.data.center_targets import draw_gaussian, gaussian_kernel, gaussian_radius, heatmap_radius
+
+    # by hand, 4 x 2 cells at min_overlap 0.1: r1 = (6 + sqrt(36 - 4 * 7.2/1.1)) / 2 = 4.567,
+    # r2 = (12 + sqrt(144 - 16 * 7.2)) / 2 = 8.683, r3 = (-1.2 + sqrt(1.44 + 1.6 * 7.2)) / 2 = 1.2
+    assert gaussian_radius(4, 2) == pytest.approx(1.2)
+    assert heatmap_radius(4, 2) == 2  # floored, at least 2
+    assert heatmap_radius(40, 20) == int(gaussian_radius(40, 20)) > 2
+    g = gaussian_kernel(2)
+    sigma = 5 / 6
+    assert g.shape == (5, 5) and g[2, 2] == 1.0 and np.allclose(g, g.T) and np.allclose(g, g[::-1])
+    assert g[2, 3] == pytest.approx(math.exp(-1 / (2 * sigma**2)))
+    hm = np.zeros((6, 7), np.float32)
+    draw_gaussian(hm, 0, 6, 2)  # corner: clipped, peak kept
+    assert hm[0, 6] == 1.0 and hm[0, 4] == pytest.approx(g[2, 0]) and hm[3:, :].sum() == 0
+    draw_gaussian(hm, 1, 5, 2)  # overlap combines by maximum, not sum
+    assert hm.max() == 1.0 and hm[1, 5] == 1.0 and hm[0, 6] == 1.0
+    with pytest.raises(ValueError, match="outside"):
+        draw_gaussian(hm, 6, 0, 2)
