@@ -36,7 +36,6 @@ from dsfec_jax.profile.records import profile
 from dsfec_jax.train.losses import LossConfig, detection_loss
 from dsfec_jax.train.schedules import optimizer
 from dsfec_jax.train.step import init_state
-from dsfec_jax.train.warm_start import warm_start
 
 from .inherit import initial_variables
 from .journal import Journal
@@ -147,12 +146,11 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
     recipe, seed, data = get_recipe(trials[0]["recipe"]), trials[0]["seed"], trials[0]["data"]
     fixed = recipe.model_overrides()
     supernet = zoo.create(base, **supernet_overrides(trials), **fixed)
-    subs = [zoo.create(base, **t["overrides"], **fixed) for t in trials]
     frames = load_frames(data, "train", recipe.train_frames, seed=0)
     cfg = supernet.config
     heads = dict(zip(HEAD_NAMES, cfg.head_classes))
     stream = BatchStream(frames, PillarSpec.of(cfg), heads, cfg.output_stride, recipe.schedule.batch_size, seed)
-    depths = [jnp.asarray(s.config.stage_blocks, jnp.int32) for s in subs]
+    depths = [jnp.asarray(zoo.config(base, **t["overrides"], **fixed).stage_blocks, jnp.int32) for t in trials]
     steps = recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
     state, supernet_s, supernet_cpu = _supernet(supernet, stream, depths, recipe, steps, seed,
                                                 journal.path.parent / supernet_file(trials), log,
@@ -199,9 +197,7 @@ def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, pat
         state = checkpoint.load(path, init_state(supernet, tx, jax.random.key(seed)))
         return state, manifest["wall_s"], manifest["cpu_s"]
     t0, c0 = time.perf_counter(), time.process_time()
-    state = init_state(supernet, tx, jax.random.key(seed))
-    if init is not None:
-        state = {**state, **warm_start(state, init)[0]}
+    state = init_state(supernet, tx, jax.random.key(seed), init)
     step_fn = supernet_step(supernet, tx, LossConfig())
     for step in range(steps):
         round_, pos = divmod(step, len(depths))

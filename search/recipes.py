@@ -1,10 +1,11 @@
 """How much each trial trains and where it is measured.
 
 `smoke` checks the whole pipeline in about a minute per trial (8 m x 8 m grid, 2 steps); its
-numbers mean nothing. `quick` ranks candidates on a 2-core CPU: a 32 m x 32 m grid in front of
-the sensor (64 x 64 cells), 150 steps of batch 4 per trial (240 for a whole one-shot supernet)
-and 100 validation frames; depth sweeps start from the base's shipped weights (search.inherit). `paper` trains on the whole grid with the
-paper's schedule. Sizes and latency are always profiled on the model's own (full) grid, so the
+numbers mean nothing. `quick` fits a sweep into ~15 minutes on a 2-core CPU: a 32 m x 32 m grid
+in front of the sensor (64 x 64 cells), 150 steps of batch 4 per trial (240 for a whole one-shot
+supernet) and 100 validation frames; depth sweeps start from the base's shipped weights
+(search.inherit). Its mAP differences below ~1.5 points are noise (README, "What the quick
+stage-2 sweep measures"). `paper` trains on the whole grid with the paper's schedule. Sizes and latency are always profiled on the model's own (full) grid, so the
 cost columns are comparable with the paper whatever the recipe.
 """
 

@@ -50,7 +50,7 @@ def unfold_zeros(path: Path, min_bytes: int = 4096) -> None:
     onnx.save(model, str(path))
 
 
-CALIBRATIONS = ("minmax", "percentile", "entropy")
+CALIBRATIONS = {"minmax": "MinMax", "percentile": "Percentile", "entropy": "Entropy"}  # -> CalibrationMethod
 
 
 def quantize_model(src: str | Path, dst: str | Path, feeds: list[dict], per_channel: bool = True,
@@ -64,9 +64,8 @@ def quantize_model(src: str | Path, dst: str | Path, feeds: list[dict], per_chan
     if not feeds:
         raise ValueError("quantize: no calibration frames")
     if calibration not in CALIBRATIONS:
-        raise ValueError(f"quantize: calibration {calibration!r}; expected one of {CALIBRATIONS}")
-    method = {"minmax": CalibrationMethod.MinMax, "percentile": CalibrationMethod.Percentile,
-              "entropy": CalibrationMethod.Entropy}[calibration]
+        raise ValueError(f"quantize: calibration {calibration!r}; expected one of {tuple(CALIBRATIONS)}")
+    method = getattr(CalibrationMethod, CALIBRATIONS[calibration])
 
     class Reader(CalibrationDataReader):
         def __init__(self):

@@ -25,7 +25,6 @@ from ..data.batches import BatchStream
 from .losses import LossConfig
 from .schedules import Schedule, optimizer
 from .step import init_state, make_train_step
-from .warm_start import warm_start
 
 
 class TrainingDiverged(RuntimeError):
@@ -82,10 +81,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     spec.run_dir.mkdir(parents=True, exist_ok=True)
     atomic.write_json(spec.run_dir / "run.json", run_info)
     tx = optimizer(spec.schedule, spec.total_steps)
-    state = init_state(detector, tx, jax.random.key(spec.seed))
-    if init_variables is not None:
-        state = {**state, **warm_start(state, init_variables)[0]}
-    state = _restore(spec.run_dir, state)
+    state = _restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed), init_variables))
     start = int(state["step"])
     log_path = spec.run_dir / "metrics.jsonl"
     _trim_metrics(log_path, start)

@@ -11,10 +11,16 @@ import jax.numpy as jnp
 import optax
 
 from .losses import LossConfig, detection_loss
+from .warm_start import warm_start
 
 
-def init_state(detector, tx: optax.GradientTransformation, rng: jax.Array) -> dict:
+def init_state(detector, tx: optax.GradientTransformation, rng: jax.Array,
+               init_variables: dict | None = None) -> dict:
+    """A fresh training state; `init_variables` (trained variables of this or a related network)
+    replace the fresh ones module by module where they match (train.warm_start)."""
     variables = detector.init(rng)
+    if init_variables is not None:
+        variables = warm_start(variables, init_variables)[0]
     return {"params": variables["params"], "batch_stats": variables.get("batch_stats", {}),
             "opt_state": tx.init(variables["params"]), "step": jnp.zeros((), jnp.int32)}
 
