@@ -43,3 +43,6 @@ class Grid:
 
 
 DSFEC_GRID = Grid()  # the paper: X [0, 80], Y [-40, 40], Z [-2.5, 2.5], 0.5 m -> 160 x 160
+# RadarNeXt's 4D-radar grids (reference-spec §1): 0.16 m pillars spanning the full height.
+VOD_GRID = Grid((0.0, 51.2), (-25.6, 25.6), (-3.0, 2.0), 0.16)  # 320 x 320
+TJ4D_GRID = Grid((0.0, 69.12), (-34.56, 34.56), (-4.0, 2.0), 0.16)  # 432 x 432

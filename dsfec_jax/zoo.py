@@ -1,7 +1,7 @@
 """The model zoo: one registry of named variants and the stable public API.
 
     >>> from dsfec_jax import zoo
-    >>> zoo.available()
+    >>> zoo.available("dsfec")
     ['baseline', 'dsfec_l', 'dsfec_m', 'dsfec_s']
     >>> det = zoo.create("dsfec_s", stem_filters=16)
     >>> variables = det.init(jax.random.key(0))
@@ -19,14 +19,14 @@ from typing import Any
 
 import jax
 
-from .models.variants import VARIANTS
+from .models.variants import RADARNEXT_VARIANTS, VARIANTS
 
-REGISTRY: dict[str, Any] = dict(VARIANTS)
+REGISTRY: dict[str, Any] = {**VARIANTS, **RADARNEXT_VARIANTS}
 
 
-def available() -> list[str]:
-    """Names of the registered variants."""
-    return sorted(REGISTRY)
+def available(family: str | None = None) -> list[str]:
+    """Names of the registered variants, optionally of one family ('dsfec', 'radarnext')."""
+    return sorted(n for n, cfg in REGISTRY.items() if family is None or cfg.family == family)
 
 
 def config(name: str, /, **overrides):
@@ -71,6 +71,24 @@ class Detector:
     def apply_method(self, variables: dict, method: str, *args, train: bool = False):
         """Run one stage (`encode`, `backbone`, `detect`) in eval mode: for profiling and probes."""
         return self.module.apply(variables, *args, train=train, method=method)
+
+
+def deploy_config(cfg):
+    """The inference-form config of any variant (itself for families without one)."""
+    from .models import radarnext
+
+    return radarnext.deploy_config(cfg) if isinstance(cfg, radarnext.RadarNeXtConfig) else cfg
+
+
+def deploy(detector: Detector, variables: dict) -> tuple[Detector, dict]:
+    """The inference form of a re-parameterizable detector (RadarNeXt: MobileOne branches fused
+    into single convs, training-only outputs dropped) and its variables; eval-mode outputs agree.
+    Families without a deploy form come back unchanged."""
+    from .models import radarnext
+
+    if not isinstance(detector.config, radarnext.RadarNeXtConfig):
+        return detector, variables
+    return Detector(deploy_config(detector.config)), radarnext.deploy_variables(detector.config, variables)
 
 
 def create(name: str, /, **overrides) -> Detector:

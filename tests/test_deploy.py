@@ -59,7 +59,7 @@ def real_frame():
     return load_frames(f"tj4d:{shared_data_dir() / 'tj4dradset' / 'Sample'}", "all", 1)[0]
 
 
-@pytest.mark.parametrize("name", zoo.available())
+@pytest.mark.parametrize("name", zoo.available("dsfec"))
 def test_onnx_matches_jitted_jax_on_synthetic_and_real_frames(name, tmp_path, real_frame):
     import onnxruntime as ort
 

@@ -16,7 +16,10 @@ def n_params(detector):
 
 
 def test_available_lists_the_paper_variants():
-    assert zoo.available() == ["baseline", "dsfec_l", "dsfec_m", "dsfec_s"]
+    assert zoo.available("dsfec") == ["baseline", "dsfec_l", "dsfec_m", "dsfec_s"]
+    radarnext = [f"radarnext_{n}{d}" for n in ("fpn", "mdfen", "pan") for d in ("", "_dense")]
+    assert zoo.available("radarnext") == radarnext
+    assert zoo.available() == sorted(zoo.available("dsfec") + radarnext)
 
 
 @pytest.mark.parametrize("name", sorted(PINNED_PARAMS))
@@ -25,7 +28,7 @@ def test_pinned_param_counts(name):
 
 
 def test_stage_blocks_follow_the_paper():
-    blocks = {n: zoo.config(n).stage_blocks for n in zoo.available()}
+    blocks = {n: zoo.config(n).stage_blocks for n in zoo.available("dsfec")}
     assert blocks == {"baseline": (3, 6, 6, 3), "dsfec_l": (3, 6, 6, 3), "dsfec_m": (3, 3, 2, 3), "dsfec_s": (1, 1, 3, 2)}
     s = zoo.config("dsfec_s")
     assert (s.act_fec, s.act_stem, s.act_backbone, s.act_car_head, s.act_truck_head, s.act_vru_head) == (

@@ -96,11 +96,12 @@ def shifted_depthwise(x_BxHxWxC, w_KxKxC, stride: int, pads: tuple[int, int] | N
 
 
 class ConvTranspose(nn.Module):
-    """KxK transposed convolution ('deconv') that upsamples by `stride`, with bias (PIXOR neck)."""
+    """KxK transposed convolution ('deconv') that upsamples by `stride`, bias optional (PIXOR: with)."""
 
     features: int
     kernel: int = 3
     stride: int = 2
+    use_bias: bool = True
 
     @nn.compact
     def __call__(self, x_BxHxWxC):
@@ -109,7 +110,7 @@ class ConvTranspose(nn.Module):
         y = lax.conv_transpose(
             x_BxHxWxC, w, (self.stride, self.stride), "SAME", dimension_numbers=DIMS
         )
-        return y + self.param("bias", nn.initializers.zeros, (self.features,))
+        return y + self.param("bias", nn.initializers.zeros, (self.features,)) if self.use_bias else y
 
     def macs(self, in_shape, out_shape) -> int:
         # Each input pixel scatters a KxK patch: zero taps of the dilated form are not counted.

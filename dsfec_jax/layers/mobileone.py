@@ -82,6 +82,24 @@ class MobileOneBlock(nn.Module):
         return math.prod(out_shape[:-1]) * self.kernel**2 * (in_shape[-1] // self.groups(in_shape[-1])) * self.features
 
 
+class RepDWSeparable(nn.Module):
+    """One Rep-DWC layer: a depthwise 3x3 MobileOne block (carries the stride), then a pointwise
+    1x1 MobileOne block to `features`. RadarNeXt's backbone layers and its neck's RepBlocks."""
+
+    features: int
+    stride: int = 1
+    branches: int = 1
+    deploy: bool = False
+    depthwise_impl: DepthwiseImpl = "shifted"
+
+    @nn.compact
+    def __call__(self, x_BxHxWxC, train: bool = False):
+        cin = x_BxHxWxC.shape[-1]
+        x = MobileOneBlock(cin, 3, self.stride, True, self.branches, self.deploy, self.depthwise_impl,
+                           name="dw")(x_BxHxWxC, train)
+        return MobileOneBlock(self.features, 1, 1, False, self.branches, self.deploy, name="pw")(x, train)
+
+
 def _fuse(kernel, bn_params, bn_stats):
     """Conv (HWIO) + BN -> (kernel, bias)."""
     std = np.sqrt(np.asarray(bn_stats["var"]) + BN_EPS)
@@ -89,21 +107,57 @@ def _fuse(kernel, bn_params, bn_stats):
     return np.asarray(kernel) * t, np.asarray(bn_params["bias"]) - np.asarray(bn_stats["mean"]) * t
 
 
-def reparameterize_block(block: MobileOneBlock, cin: int, params: dict, stats: dict) -> dict:
-    """Trained {params, batch_stats} of one block -> {params: {kernel, bias}} of its deploy form."""
-    k, g = block.kernel, block.groups(cin)
-    kernel = np.zeros((k, k, cin // g, block.features), np.float32)
-    bias = np.zeros((block.features,), np.float32)
-    branches = [(params[f"conv{b}"], f"conv{b}_bn") for b in range(block.branches)]
-    if k > 1:
+def fuse_branches(params: dict, stats: dict) -> dict:
+    """One block's trained {params, batch_stats} -> {kernel, bias} of its deploy form. Read from
+    the shapes alone (k conv branches, a scale branch, an identity branch when present), so a
+    whole variables tree can be fused without the modules that made it."""
+    k, _, cin_per_group, features = np.shape(params["conv0"])
+    kernel = np.zeros((k, k, cin_per_group, features), np.float32)
+    bias = np.zeros((features,), np.float32)
+    branches = [(params[name], f"{name}_bn") for name in sorted(params) if name.startswith("conv") and "_" not in name]
+    if "scale" in params:
         pad = k // 2
         branches.append((np.pad(np.asarray(params["scale"]), ((pad, pad), (pad, pad), (0, 0), (0, 0))), "scale_bn"))
-    if block.has_identity(cin):
+    if "identity_bn" in params:
         eye = np.zeros_like(kernel)
-        out = np.arange(block.features)
-        eye[k // 2, k // 2, out % (cin // g), out] = 1.0
+        out = np.arange(features)
+        eye[k // 2, k // 2, out % cin_per_group, out] = 1.0  # depthwise: cin_per_group == 1
         branches.append((eye, "identity_bn"))
     for w, bn in branches:
         fw, fb = _fuse(w, params[bn], stats[bn])
         kernel, bias = kernel + fw, bias + fb
-    return {"params": {"kernel": jnp.asarray(kernel), "bias": jnp.asarray(bias)}}
+    return {"kernel": jnp.asarray(kernel), "bias": jnp.asarray(bias)}
+
+
+def is_branched_block(params: dict) -> bool:
+    return isinstance(params, dict) and "conv0" in params and "conv0_bn" in params
+
+
+def reparameterize_tree(variables: dict) -> dict:
+    """Fuse every MobileOne block in a variables tree; everything else is copied unchanged.
+    Blocks without BN state left disappear from 'batch_stats'."""
+    def walk(params, stats):
+        if is_branched_block(params):
+            return fuse_branches(params, stats), None
+        out_p, out_s = {}, {}
+        for key, sub in params.items():
+            if isinstance(sub, dict):
+                fp, fs = walk(sub, (stats or {}).get(key, {}))
+                out_p[key] = fp
+                if fs:
+                    out_s[key] = fs
+            else:
+                out_p[key] = sub
+        for key, sub in (stats or {}).items():
+            if key not in params:
+                out_s[key] = sub
+        return out_p, out_s
+
+    params, stats = walk(dict(variables["params"]), dict(variables.get("batch_stats", {})))
+    return {"params": params, "batch_stats": stats}
+
+
+def reparameterize_block(block: MobileOneBlock, cin: int, params: dict, stats: dict) -> dict:
+    """Trained {params, batch_stats} of one block -> {params: {kernel, bias}} of its deploy form."""
+    block.groups(cin)  # validates a depthwise block's widths
+    return {"params": fuse_branches(params, stats)}

@@ -12,6 +12,7 @@ any shared per-block cost), so M and S also narrow the stages, extend the neck t
 from __future__ import annotations
 
 from .dsfec import DSFECConfig
+from .radarnext import RadarNeXtConfig
 
 PIXOR_NOTE = "PIXOR widths; neck (192,128,64) to 80x80 (an assumption: the paper gives no neck)"
 
@@ -36,3 +37,14 @@ VARIANTS: dict[str, DSFECConfig] = {
               "(block counts alone cannot reach the paper's size)",
     ),
 }
+
+
+# RadarNeXt (arXiv 2501.02314) Tables I-II: three necks, each over Rep-DWC or the Dense backbone.
+RADARNEXT_NOTE = "VoD grid 320x320, 0.16 m pillars; counts after re-parameterization, corner head excluded"
+RADARNEXT_VARIANTS: dict[str, RadarNeXtConfig] = {}
+for _neck, _dcn in (("fpn", ()), ("pan", ()), ("mdfen", (4,))):
+    RADARNEXT_VARIANTS[f"radarnext_{_neck}"] = RadarNeXtConfig(
+        name=f"radarnext_{_neck}", neck=_neck, dcn_positions=_dcn, notes=RADARNEXT_NOTE)
+    RADARNEXT_VARIANTS[f"radarnext_{_neck}_dense"] = RadarNeXtConfig(
+        name=f"radarnext_{_neck}_dense", neck=_neck, dcn_positions=_dcn, backbone="dense",
+        notes="Dense = the PointPillars SECOND backbone (3x3 convs, 1 + (3,5,5) per stage). " + RADARNEXT_NOTE)

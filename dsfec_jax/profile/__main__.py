@@ -39,9 +39,10 @@ def human(records: list[dict]) -> str:
     lines = []
     for r in records:
         lat = r.get("latency_ms")
+        mem = "-" if r["memory_mb"] is None else f"{r['memory_mb']:.2f}"
         lines.append(
-            f"{r['model']:<10} params {r['params']:>10,d}  GFLOPs {r['gflops']:7.3f} (XLA {r['xla_gflops']:7.3f}, "
-            f"{100 * r['xla_vs_analytic']:+.1f} %)  memory {r['memory_mb']:.2f} MB (XLA peak {r['xla_peak_mb']:.1f} MB)  "
+            f"{r['model']:<15} params {r['params']:>10,d}  GFLOPs {r['gflops']:7.3f} (XLA {r['xla_gflops']:7.3f}, "
+            f"{100 * r['xla_vs_analytic']:+.1f} %)  memory {mem} MB (XLA peak {r['xla_peak_mb']:.1f} MB)  "
             + (f"latency {lat:.2f} ms (p90 {r['latency_p90_ms']:.2f})" if lat else "latency -")
         )
         lines.append("           GFLOPs/stage " + ", ".join(f"{k} {v:.3f}" for k, v in r["gflops_per_stage"].items()))

@@ -15,8 +15,11 @@ import numpy as np
 MIB = 2**20
 
 
-def paper_memory_mb(detector, variables) -> float:
+def paper_memory_mb(detector, variables) -> float | None:
+    """DSFEC's stem-memory figure; None for families without a DSFEC stem (use xla_peak_mb)."""
     cfg = detector.config
+    if cfg.family != "dsfec":
+        return None
     nx, ny = cfg.grid.shape
     maps = nx * ny * cfg.in_channels
     for i in range(cfg.stem_convs):

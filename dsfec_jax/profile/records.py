@@ -27,7 +27,7 @@ def size_record(detector, xla: bool = True) -> dict:
         "gflops": round(flops["total"], 4),
         "gflops_per_stage": {k: round(v, 4) for k, v in flops["per_stage"].items()},
         "gflops_convention": counting.FLOPS_CONVENTION,
-        "memory_mb": round(memory.paper_memory_mb(detector, variables), 4),
+        "memory_mb": None if (mem := memory.paper_memory_mb(detector, variables)) is None else round(mem, 4),
         "memory_convention": "stem input + output maps (float32, batch 1) + stem weights, MiB (DSFEC Table 2)",
         "notes": cfg.notes,
     }

@@ -1,0 +1,115 @@
+"""RadarNeXt family: sizes against the paper, fused == unfused, shapes and config errors."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from dsfec_jax import zoo
+from dsfec_jax.grid import Grid
+from dsfec_jax.models.center_head import CenterHead
+from dsfec_jax.profile import counting
+
+RADARNEXT = zoo.available("radarnext")
+TINY = dict(grid=Grid((0.0, 5.12), (-2.56, 2.56), (-3.0, 2.0), 0.16), max_pillars=128)  # 32 x 32
+
+
+def deployed_params(name: str, **overrides) -> int:
+    det = zoo.create(name, **overrides)
+    variables = jax.eval_shape(det.init, jax.random.key(0))
+    fused_det, fused = zoo.deploy(det, jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), variables))
+    return counting.count_params(fused)["total"]
+
+
+def test_all_six_variants_are_registered():
+    assert sorted(RADARNEXT) == sorted(f"radarnext_{n}{d}" for n in ("fpn", "pan", "mdfen") for d in ("", "_dense"))
+
+
+# Reference-spec §1: the public code's re-parameterized counts (k = 1, no corner head) are
+# 1,579,832 (MDFEN) and 1,531,340 (PAN), the paper's 1.580M / 1.531M; FPN counts 1.051M there.
+@pytest.mark.parametrize("name,expected", [("radarnext_mdfen", 1_579_832), ("radarnext_pan", 1_531_340),
+                                           ("radarnext_fpn", 1_051_340), ("radarnext_pan_dense", 5_336_716),
+                                           ("radarnext_mdfen_dense", 5_385_208)])
+def test_deployed_parameter_counts_match_the_public_code(name, expected):
+    assert deployed_params(name) == expected
+
+
+# Table III: a DCNv3 over C channels adds 2C^2 + 122C + 108 parameters to the PAN's 1,531,340.
+@pytest.mark.parametrize("positions,paper_m", [((1,), 1.694), ((2,), 1.694), ((5,), 1.547), ((1, 2, 4), 1.905)])
+def test_dcn_positions_reproduce_table_iii_counts(positions, paper_m):
+    assert round(deployed_params("radarnext_mdfen", dcn_positions=positions) / 1e6, 3) == paper_m
+
+
+def random_variables(det, seed: int) -> dict:
+    """Random weights and non-trivial BN statistics without compiling `init` (the shapes come
+    from eval_shape), so fusion is tested on more than identity statistics."""
+    rng = np.random.default_rng(seed)
+
+    def fill(path, leaf):
+        name = path[-1].key
+        if name == "var":
+            return jnp.asarray(rng.uniform(0.5, 2.0, leaf.shape), leaf.dtype)
+        if name == "scale":
+            return jnp.asarray(rng.uniform(0.0, 1.0, leaf.shape), leaf.dtype)
+        fan_in = int(np.prod(leaf.shape[:-1])) if len(leaf.shape) > 1 else 4
+        return jnp.asarray(rng.normal(0, fan_in**-0.5, leaf.shape), leaf.dtype)
+
+    return jax.tree_util.tree_map_with_path(fill, jax.eval_shape(det.init, jax.random.key(0)))
+
+
+# Every neck x backbone; a shallower (2, 2, 2) backbone keeps the test fast and still has, in
+# every stage, a strided layer (2 branches) and an identity layer (3 branches).
+@pytest.mark.parametrize("name", RADARNEXT)
+def test_fused_equals_unfused_in_eval_mode(name):
+    det = zoo.create(name, layer_nums=(2, 2, 2), **TINY)
+    variables = random_variables(det, 1)
+    inputs = det.dummy_inputs(1)
+    fused_det, fused = zoo.deploy(det, variables)
+    assert fused_det.config.deploy and not fused_det.config.corner_head
+    out = jax.jit(det.apply)(variables, inputs)
+    fused_out = jax.jit(fused_det.apply)(fused, inputs)
+    assert set(out) - set(fused_out) == {"corner_hm"}
+    for key, value in fused_out.items():
+        assert value.shape == out[key].shape == (1, 16, 16, value.shape[-1])  # H/2 of the 32 x 32 grid
+        assert float(jnp.abs(value).max()) > 1e-3, f"{name}: {key} is all zeros"
+        np.testing.assert_allclose(value, out[key], atol=1e-5, rtol=1e-5, err_msg=f"{name}: {key}")
+    if det.config.backbone == "rep_dwc":  # a MobileOne block really was fused: no branch BN left
+        layer = fused["params"]["backbone_net"]["stage1_layer1"]["dw"]
+        assert set(layer) == {"kernel", "bias"} and "backbone_net" not in fused["batch_stats"]
+
+
+def test_head_outputs_and_heatmap_prior():
+    det = zoo.create("radarnext_pan", layer_nums=(1, 1, 1), **TINY)
+    out = jax.jit(det.apply)(random_variables(det, 0), det.dummy_inputs(1, occupancy=0.0))
+    channels = {k: v.shape[-1] for k, v in out.items()}
+    assert channels == {"reg": 2, "height": 1, "dim": 3, "rot": 2, "iou": 1, "hm": 3, "corner_hm": 1}
+    head = CenterHead(3).init(jax.random.key(0), jnp.zeros((1, 4, 4, 384)))
+    np.testing.assert_allclose(head["params"]["hm_out"]["bias"], -2.19)
+    np.testing.assert_allclose(head["params"]["corner_hm_out"]["bias"], -2.19)
+    np.testing.assert_allclose(head["params"]["reg_out"]["bias"], 0.0)
+
+
+@pytest.mark.parametrize("overrides,field", [
+    (dict(neck="mdfen", dcn_positions=()), "dcn_positions"),
+    (dict(neck="pan", dcn_positions=(4,)), "dcn_positions"),
+    (dict(dcn_positions=(6,)), "dcn_positions"),
+    (dict(neck="bifpn"), "neck"),
+    (dict(backbone="resnet"), "backbone"),
+    (dict(layer_nums=(3, 0, 5)), "layer_nums"),
+])
+def test_invalid_configs_name_the_field(overrides, field):
+    with pytest.raises(ValueError, match=field):
+        zoo.create("radarnext_mdfen", **overrides)
+
+
+def test_non_reparameterizable_families_deploy_unchanged():
+    det = zoo.create("dsfec_s")
+    same, variables = zoo.deploy(det, {"params": {}})
+    assert same is det and variables == {"params": {}}
+
+
+def test_dense_backbone_has_no_mobileone_blocks():
+    det = zoo.create("radarnext_fpn_dense", **TINY)
+    params = jax.eval_shape(det.init, jax.random.key(0))["params"]["backbone_net"]
+    assert sorted(params)[:2] == ["stage1_conv0", "stage1_conv1"] and len(params) == 3 + 5 + 5 + 3
+    assert jnp.ndim(params["stage1_conv0"]["conv"]["kernel"]) == 4
