@@ -34,7 +34,7 @@ def parse_overrides(items: list[str]) -> dict:
 def common(p: argparse.ArgumentParser, split: str) -> None:
     p.add_argument("--model", required=True, help="a zoo name (dsfec_jax.zoo.available())")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
-    p.add_argument("--data", default="synthetic", help="synthetic | vod:PATH | tj4d:PATH | nuscenes:DATAROOT")
+    p.add_argument("--data", default="synthetic", help="synthetic | synthetic4d | vod:PATH | tj4d:PATH | nuscenes:DATAROOT")
     p.add_argument("--split", default=split)
     p.add_argument("--frames", type=int, default=None, help="frames to use (synthetic: to generate)")
     p.add_argument("--seed", type=int, default=0, help="data seed (synthetic) and init seed (train)")
@@ -52,7 +52,7 @@ def parse(argv=None) -> argparse.Namespace:
     t = sub.add_parser("train", help="train a zoo model (resumes an existing run directory)")
     common(t, "train")
     t.add_argument("--run-dir", required=True)
-    t.add_argument("--schedule", default="quick", choices=("quick", "paper"))
+    t.add_argument("--schedule", default="quick", choices=("quick", "paper", "radarnext"))
     t.add_argument("--steps", type=int, default=None, help="override the schedule's length")
     t.add_argument("--batch-size", type=int, default=None)
     t.add_argument("--val-frames", type=int, default=100)
@@ -111,10 +111,14 @@ def run_train(args) -> int:
     from .train.fit import fit
     from .train.schedules import get_schedule
 
-    overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
+    from . import zoo
+
+    overrides = {"max_pillars": args.max_pillars or zoo.config(args.model).max_pillars, **parse_overrides(args.set)}
     sched = get_schedule(args.schedule, **({"batch_size": args.batch_size} if args.batch_size else {}))
-    frames = load_frames(args.data, args.split, args.frames or (sched.batch_size * 100), args.seed)
-    val = load_frames(args.data, "val", args.val_frames, args.seed)
+    # RadarNeXt reads a source's own columns (VoD's 7, TJ4D's 8); DSFEC the nuScenes ones
+    features = "native" if zoo.config(args.model).family == "radarnext" else "dsfec"
+    frames = load_frames(args.data, args.split, args.frames or (sched.batch_size * 100), args.seed, features=features)
+    val = load_frames(args.data, "val", args.val_frames, args.seed, features=features)
     info = {"command": command_line(args),
             "data": {"source": args.data, "split": args.split}}
     _, _, final = fit(args.model, overrides, frames, val, sched, args.run_dir, args.seed, args.steps,

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from typing import Sequence
 
+import numpy as np
+
 from .data.frame import Frame
-from .metrics import nuscenes
+from .metrics import kitti3d, nuscenes
 from .predict import Detections, Predictor
 
 
@@ -48,3 +50,29 @@ def headline(metrics: dict) -> dict:
 def evaluate(predictor: Predictor, frames: Sequence[Frame], classes=nuscenes.DSFEC_CLASSES) -> dict:
     metrics = score(frames, predict_frames(predictor, frames), classes, predictor.spec.grid)
     return {**headline(metrics), "metrics": metrics}
+
+
+# VoD's IoU thresholds under the project's canonical class names (VoD's Cyclist is "bicycle").
+VOD_IOU = {"car": 0.5, "pedestrian": 0.25, "bicycle": 0.25}
+TJ4D_IOU = {**VOD_IOU, "truck": 0.5}
+
+
+def _kitti_frame(boxes, scores=None) -> dict:
+    out = {"names": list(boxes.names), "boxes": np.column_stack([boxes.center, boxes.size, boxes.yaw]).reshape(-1, 7)}
+    if scores is not None:
+        out["scores"] = np.asarray(scores)
+    return out
+
+
+def evaluate_vod(predictor, frames: Sequence[Frame], iou_thresholds=VOD_IOU) -> dict:
+    """The View-of-Delft protocol (3D AP, 11 recall points) in the entire area and the corridor:
+    headline mAP (entire), mAP_corridor, per-class AP of both. Ground truth centred off the
+    detector's grid is left out, as in `score`."""
+    frames = [frames[i] for i in range(len(frames))]
+    detections = predict_frames(predictor, frames)
+    gts = [_kitti_frame(in_grid(f.boxes, predictor.spec.grid)) for f in frames]
+    dets = [_kitti_frame(detections[f.frame_id].boxes, detections[f.frame_id].scores) for f in frames]
+    both = kitti3d.evaluate_vod(gts, dets, iou_thresholds)
+    entire, corridor = both["entire"], both["corridor"]
+    return {"mAP": entire["mAP"], "mAP_corridor": corridor["mAP"], "AP": entire["AP"],
+            "AP_corridor": corridor["AP"], "num_gt": entire["num_gt"]}

@@ -9,6 +9,7 @@ import jax
 import numpy as np
 
 from .boxes import priors
+from .boxes.center_decode import decode_center_head
 from .boxes.decode import decode_heads
 from .boxes.nms import batched_rotated_nms
 from .boxes.pixor import cell_centres
@@ -74,3 +75,34 @@ class Predictor(HostPipeline):
 
     def run(self, batch: dict):
         return jax.device_get(self.network(self.variables, batch))
+
+
+class CenterPredictor(HostPipeline):
+    """The same pipeline for CenterHead detectors (RadarNeXt): 3D boxes come out of the network
+    (centre z and height included); rotated NMS per class on their BEV footprints (IoU 0.2, at
+    most 83 boxes per frame after NMS, as the public config)."""
+
+    def __init__(self, detector, variables, score_threshold: float = 0.1, top_k: int = 500,
+                 nms_iou: float = 0.2, max_boxes: int = 83):
+        cfg = detector.config
+        self.detector, self.variables = detector, variables
+        self._setup(PillarSpec.of(cfg), {"center": tuple(cfg.classes)}, score_threshold, nms_iou, max_boxes)
+        self.network = jax.jit(lambda v, x: decode_center_head(detector.apply(v, x), cfg.grid, cfg.output_stride, top_k))
+
+    def run(self, batch: dict):
+        return jax.device_get(self.network(self.variables, batch))
+
+    def _postprocess(self, boxes, scores, labels) -> Detections:
+        bev = boxes[:, [0, 1, 3, 4, 6]].astype(np.float64)
+        keep = batched_rotated_nms(bev, scores, labels, self.nms_iou, max_output=self.max_boxes,
+                                   score_threshold=self.score_threshold)
+        b = boxes[keep].astype(np.float32)
+        names = np.array([self.class_names[i] for i in labels[keep]], dtype="<U16")
+        out = Boxes(b[:, :3], b[:, 3:6], b[:, 6], np.zeros((len(keep), 2), np.float32), names)
+        return Detections(out, scores[keep].astype(np.float32))
+
+
+def predictor_for(detector, variables, **options) -> HostPipeline:
+    """The JAX predictor matching the detector's head (dense PIXOR heads or a CenterHead)."""
+    cls = CenterPredictor if detector.config.family == "radarnext" else Predictor
+    return cls(detector, variables, **options)

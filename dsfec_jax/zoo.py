@@ -118,7 +118,7 @@ def load_variables(detector: Detector, path: str | Path) -> dict:
 
 def load(name: str, /, weights: str | Path | None = None, predictor_options: dict | None = None, **overrides):
     """A ready predictor: `zoo.load("dsfec_s")(points) -> Detections` (shipped weights by default)."""
-    from .predict import Predictor
+    from .predict import predictor_for
 
     detector = create(name, **overrides)
     path = Path(weights) if weights else shipped_weights(name)
@@ -126,5 +126,5 @@ def load(name: str, /, weights: str | Path | None = None, predictor_options: dic
         raise FileNotFoundError(f"no weights at {path}" + ("" if weights else f": {name!r} ships no weights yet; "
                                 f"train with `dsfec train --model {name}` and pass --weights"))
     variables = load_variables(detector, path)
-    return Predictor(detector, {"params": variables["params"], "batch_stats": variables["batch_stats"]},
-                     **(predictor_options or {}))
+    return predictor_for(detector, {"params": variables["params"], "batch_stats": variables["batch_stats"]},
+                         **(predictor_options or {}))

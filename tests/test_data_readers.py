@@ -338,6 +338,47 @@ def test_tj4d_boxes_with_radar_points_match_provenance(shared_data):
     np.testing.assert_allclose(first.column("range"), np.linalg.norm(xyz, axis=1), atol=1e-4)  # column order
 
 
+def test_load_frames_native_keeps_tj4d_columns(shared_data):
+    from dsfec_jax.data.sources import DSFEC_FEATURES, load_frames
+
+    data = f"tj4d:{tj4d_root(shared_data)}"
+    native, mapped = load_frames(data, "all", 2, features="native"), load_frames(data, "all", 2)
+    assert len(native) == len(mapped) == 2
+    for a, b in zip(native, mapped):
+        assert a.point_features == kitti.TJ4D_FEATURES and a.points.shape[1] == 8
+        assert b.point_features == DSFEC_FEATURES and len(a.points) == len(b.points)
+        assert np.array_equal(a.points[:, :3], b.points[:, :3]) and np.array_equal(a.boxes.names, b.boxes.names)
+    raw = kitti.read_tj4d_frame(tj4d_root(shared_data), kitti.list_frames(tj4d_root(shared_data))[0])
+    assert np.array_equal(native[0].points, raw.points)  # untouched, only the classes are mapped
+
+
+def test_load_frames_native_vod_maps_classes_and_drops_the_rest(shared_data):
+    from dsfec_jax.data.sources import load_frames
+
+    frame = load_frames(f"vod:{vod_root(shared_data)}", "all", 3, features="native")[1]  # 01047
+    raw = kitti.read_vod_frame(vod_root(shared_data), "01047")
+    assert frame.point_features == kitti.VOD_FEATURES and np.array_equal(frame.points, raw.points)
+    assert set(frame.boxes.names) == {"car", "pedestrian", "bicycle"}  # cyclist -> bicycle
+    kept = np.isin(raw.boxes.names, ["car", "pedestrian", "bicycle", "cyclist"])
+    assert len(frame.boxes) == kept.sum()  # rider, bicycle_rack, moped_scooter dropped
+
+
+def test_load_frames_synthetic4d_and_errors():
+    from dsfec_jax.data.sources import DSFEC_FEATURES, load_frames
+
+    frames = load_frames("synthetic4d", "train", 2, features="native")
+    assert len(frames) == 2 and frames[1].point_features == kitti.VOD_FEATURES
+    mapped = load_frames("synthetic4d", "train", 2)  # features="dsfec": the DSFEC models' columns
+    assert mapped[1].point_features == DSFEC_FEATURES and len(mapped[1].points) == len(frames[1].points)
+    assert set(frames[0].boxes.names) <= {"car", "truck", "pedestrian", "bicycle"}
+    with pytest.raises(ValueError, match=r"features='raw'.*dsfec.*native"):
+        load_frames("synthetic", "train", 1, features="raw")
+    with pytest.raises(ValueError, match=r"'radar:x'.*synthetic4d.*tj4d:PATH"):
+        load_frames("radar:x", "train", 1)
+    with pytest.raises(ValueError, match=r"synthetic4d.*'all'"):
+        load_frames("synthetic4d", "all", 1)
+
+
 def test_box_conventions_agree_where_frames_align(shared_data):
     """Camera-upright and LiDAR-upright conversions differ only by the calibrations' small tilt."""
     root = vod_root(shared_data)

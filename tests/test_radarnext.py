@@ -113,3 +113,17 @@ def test_dense_backbone_has_no_mobileone_blocks():
     params = jax.eval_shape(det.init, jax.random.key(0))["params"]["backbone_net"]
     assert sorted(params)[:2] == ["stage1_conv0", "stage1_conv1"] and len(params) == 3 + 5 + 5 + 3
     assert jnp.ndim(params["stage1_conv0"]["conv"]["kernel"]) == 4
+
+
+def test_origin_input_equals_a_detector_built_on_that_window():
+    """Training windows pass their origin as an input instead of compiling one network each."""
+    window = Grid((2.56, 7.68), (-1.28, 3.84), (-3.0, 2.0), 0.16)  # the TINY shape, shifted
+    base = zoo.create("radarnext_fpn", layer_nums=(1, 1, 1), **TINY)
+    on_window = zoo.create("radarnext_fpn", layer_nums=(1, 1, 1), grid=window, max_pillars=128)
+    variables = random_variables(base, 3)
+    inputs = on_window.dummy_inputs(1)
+    want = jax.jit(on_window.apply)(variables, inputs)
+    got = jax.jit(base.apply)(variables, {**inputs, "origin": jnp.array([[2.56, -1.28]])})
+    shifted = jax.jit(base.apply)(variables, inputs)  # without the origin: the base grid's offsets
+    np.testing.assert_allclose(got["hm"], want["hm"], atol=1e-5)
+    assert float(jnp.abs(shifted["hm"] - want["hm"]).max()) > 1e-4

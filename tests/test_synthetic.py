@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from dsfec_jax.data.frame import Frame
-from dsfec_jax.data.synthetic import (CLASSES, RADAR_FEATURES, SOURCES, CachedDataset, SyntheticConfig,
-                                      SyntheticDataset, frame_rng, generate_frame, open_cache, write_cache)
+from dsfec_jax.data.synthetic import (CLASSES, RADAR4D_CONFIG, RADAR_FEATURES, SOURCES, CachedDataset,
+                                      SyntheticConfig, SyntheticDataset, frame_rng, generate_frame, open_cache,
+                                      radar4d_config, write_cache)
 from dsfec_jax.data.synthetic.bev_png import PNG_SIGNATURE, save_bev_png
 from dsfec_jax.data.synthetic.scene import EgoMotion
 from dsfec_jax.data.synthetic.stats import dataset_stats, format_stats, throughput
@@ -265,3 +266,158 @@ def test_rcs_follows_class_and_aspect():
     assert abs(ped.std() - 3.94) < 0.2 and abs(front.std() - 3.41) < 0.2
     # the log-normal mean correction keeps the linear mean at the class value (-1.37 dBsm)
     assert abs(10 * np.log10(np.mean(10 ** (ped / 10))) - (-1.37)) < 0.3
+
+
+# ------------------------------------------------------------------ default frames stay as shipped
+
+
+# Summaries of default-config frames recorded before the 4D profile was added (FORMAT_VERSION 1):
+# (points, boxes, per-column float64 sums). Counts are exact; sums get a tolerance for ULP-level
+# differences of numpy's transcendental functions between machines.
+DEFAULT_GOLDEN = {
+    0: (406, 41, (7083.516621656716, -44.26062321057543, 0.0, -440.5, -176.57549288505106, -153.1183808582864,
+                  77.15384809672832)),
+    1: (641, 49, (14194.000653893687, -1693.4081521630287, 0.0, -140.5, -12.750579131708946, 5.68074721020821,
+                  122.00000297278166)),
+    2: (618, 63, (14791.887041002512, 181.60646495595574, 0.0, 1444.5, 36.543787870847154, 40.66123553268699,
+                  121.3846183642745)),
+}
+
+
+def test_default_frames_match_the_golden_summaries():
+    from dsfec_jax.data.synthetic.config import FORMAT_VERSION
+
+    assert FORMAT_VERSION == 1  # bumping it means regenerating DEFAULT_GOLDEN (and the shipped weights' data)
+    for index, (n_points, n_boxes, sums) in DEFAULT_GOLDEN.items():
+        f = generate_frame(CFG, "train", index, seed=0)
+        assert (len(f.points), len(f.boxes)) == (n_points, n_boxes)
+        np.testing.assert_allclose(f.points.astype(np.float64).sum(0), sums, rtol=1e-5, atol=1e-3)
+
+
+# ------------------------------------------------------------------ the 4D (View-of-Delft-like) profile
+
+CFG4D = RADAR4D_CONFIG
+
+
+@pytest.fixture(scope="module")
+def frames4d():
+    """20 frames of the 4D profile (~15 ms each)."""
+    return [generate_frame(CFG4D, "train", i, seed=0) for i in range(20)]
+
+
+def _los(points: np.ndarray) -> np.ndarray:
+    """3D unit line of sight of sweep-0 points (the sensor is at the origin then)."""
+    p = points[:, :3].astype(np.float64)
+    return p / np.linalg.norm(p, axis=1, keepdims=True)
+
+
+def test_4d_profile_has_vod_columns_elevation_and_scan_ids(frames4d):
+    from dsfec_jax.data.kitti import VOD_FEATURES
+    from dsfec_jax.models.radarnext import VOD_FEATURES as MODEL_FEATURES
+
+    assert CFG4D.point_features == VOD_FEATURES == MODEL_FEATURES and CFG4D.grid.shape == (320, 320)
+    for f in frames4d:
+        assert f.point_features == VOD_FEATURES and f.points.dtype == np.float32 and np.isfinite(f.points).all()
+    time = np.concatenate([f.column("time") for f in frames4d])
+    assert set(np.unique(time)) == {0.0, -1.0, -2.0, -3.0, -4.0} and not np.signbit(time[time == 0]).any()
+    z = np.concatenate([f.column("z") for f in frames4d])
+    # Heights spread over the scene (ground at -0.4 m, structures and noise up to a few metres).
+    assert 0.5 < z.std() < 2.0 and -3.0 < np.percentile(z, 1) and np.percentile(z, 99) < 5.0
+    # Object points sit around their box's height (the box centre is 0.6-1.4 m above the ground).
+    dz = np.concatenate([_height_above_box_centre(f) for f in frames4d])
+    assert len(dz) > 1000 and np.median(np.abs(dz)) < 0.6
+
+
+def _height_above_box_centre(f: Frame) -> np.ndarray:
+    box = f.meta["point_box"]
+    return f.column("z")[box >= 0] - f.boxes.center[box[box >= 0], 2]
+
+
+def test_4d_radial_velocities_follow_vod_conventions(frames4d):
+    residual, static, ego_part, static_vr = [], [], [], []
+    for f in frames4d:
+        p, box, src = f.points.astype(np.float64), f.meta["point_box"], f.meta["point_source"]
+        now = f.column("time") == 0
+        u = _los(p)
+        sel = now & (box >= 0)
+        v = f.boxes.velocity[box[sel]]                 # horizontal: the radial speed is v . u[:, :2]
+        residual.append((p[sel, 5] - np.sum(v * u[sel, :2], 1))[np.hypot(*v.T) > 3.0])
+        static.append(p[now & (src == STRUCTURE), 5])
+        ego = f.meta["ego_velocity"]
+        ego_part.append(p[now, 4] - p[now, 5] + u[now, :2] @ ego)  # v_r - v_r_comp = -v_ego . u
+        if np.hypot(*ego) > 3.0:
+            static_vr.append(p[now & (src == STRUCTURE) & (p[:, 0] > 5.0), 4])
+    residual, static, ego_part = map(np.concatenate, (residual, static, ego_part))
+    assert len(residual) > 100 and abs(np.median(residual)) < 0.1 and np.percentile(np.abs(residual), 90) < 0.6
+    assert len(static) > 1000 and np.median(np.abs(static)) < 0.06 and np.percentile(np.abs(static), 95) < 0.2
+    assert np.abs(ego_part).max() < 0.15  # only the odometry error (0.02 m/s) is left
+    assert len(static_vr) >= 5 and np.median(np.concatenate(static_vr)) < -1.0  # static world approaches
+
+
+def test_4d_profile_is_denser_than_the_ars408_profile(frames, frames4d):
+    def per_box(fs, cls):
+        counts = [f.meta["num_points"][(f.boxes.names == cls) & (np.hypot(*f.boxes.center[:, :2].T) < 30)]
+                  for f in fs]
+        return np.concatenate(counts).mean()
+
+    for cls in ("car", "pedestrian"):
+        assert per_box(frames4d, cls) > 1.5 * per_box(frames[:20], cls), cls
+    assert np.mean([len(f.points) for f in frames4d]) > 1.5 * np.mean([len(f.points) for f in frames[:20]])
+
+
+def test_4d_class_mix_is_vod_like(frames, frames4d):
+    def counts(fs):
+        names = np.concatenate([f.boxes.names for f in fs])
+        return {c: np.sum(names == c) for c in CLASSES}
+
+    vod, default = counts(frames4d), counts(frames[:20])
+    assert vod["pedestrian"] + vod["bicycle"] > 1.5 * vod["car"] and vod["truck"] < 0.05 * sum(vod.values())
+    assert default["pedestrian"] + default["bicycle"] < default["car"]  # the knob, not the scenes, changes it
+
+
+def test_4d_annotation_and_points_stay_in_the_camera_view(frames4d):
+    from dsfec_jax.boxes.geometry import bev_corners
+
+    half = np.deg2rad(CFG4D.camera_fov_deg) / 2 + 1e-5
+    for f in frames4d:
+        assert np.all(np.abs(np.arctan2(f.column("y"), f.column("x"))) <= half)
+        b = f.boxes
+        corners = bev_corners(b.center[:, :2], b.size[:, :2], b.yaw)
+        assert np.all((np.abs(np.arctan2(corners[..., 1], corners[..., 0])) <= half).any(1))
+        assert np.all(np.hypot(*b.center[:, :2].T) <= 50.0) and set(b.names) <= set(CLASSES)
+
+
+def test_4d_frames_are_deterministic_and_cache(tmp_path, frames4d):
+    again = generate_frame(radar4d_config("normal"), "train", 3, seed=0)
+    assert _same(again, frames4d[3]) and np.array_equal(again.meta["point_box"], frames4d[3].meta["point_box"])
+    assert not _same(again, frames4d[4])
+    ds = SyntheticDataset(CFG4D, "val", seed=1, num_frames=2)
+    cached = CachedDataset(write_cache(ds, tmp_path / "c4d"), CFG4D, "val", 1)
+    assert cached.manifest["point_features"] == list(CFG4D.point_features)
+    assert _same(cached[1], ds[1]) and cached[1].point_features == CFG4D.point_features
+
+
+def test_vod_format_rewrites_columns_not_the_scene():
+    nus, vod = generate_frame(CFG, "val", 2), generate_frame(SyntheticConfig(point_format="vod"), "val", 2)
+    assert np.array_equal(nus.points[:, :4], vod.points[:, :4]) and _same_boxes(nus, vod)
+    assert np.array_equal(vod.column("time"), -np.round(nus.column("dt") / CFG.sweep_period_s))
+
+
+def _same_boxes(a: Frame, b: Frame) -> bool:
+    return np.array_equal(a.boxes.center, b.boxes.center) and np.array_equal(a.boxes.names, b.boxes.names)
+
+
+def test_new_config_knobs_are_checked_and_pinned():
+    from dsfec_jax.data.synthetic.config import TRAFFIC_MIX_NAMES
+    from dsfec_jax.data.synthetic.scene import TRAFFIC_MIXES
+
+    assert set(TRAFFIC_MIXES) == set(TRAFFIC_MIX_NAMES)
+    for bad, names in ((dict(point_format="kitti"), ("kitti", "vod", "nuscenes")),
+                       (dict(traffic_mix="delft"), ("delft", "vod")),
+                       (dict(density_scale=0.0), ("density_scale",)),
+                       (dict(camera_fov_deg=0.0), ("camera_fov_deg",))):
+        with pytest.raises(ValueError) as err:
+            SyntheticConfig(**bad)
+        assert all(n in str(err.value) for n in names), err.value
+    assert SyntheticConfig.from_dict(CFG4D.to_dict()) == CFG4D
+    assert radar4d_config("hard").difficulty == "hard" and radar4d_config(num_sweeps=3).num_sweeps == 3

@@ -12,21 +12,34 @@ window.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Callable, Sequence
 
 import jax
 import numpy as np
 
 from .augment import AugmentConfig, augment
 from ..grid import Grid
-from .frame import Frame
+from .frame import Boxes, Frame
 from .pillarize import PillarSpec, pillarize_frames
 from .targets import detector_targets
 
 
-def collate(frames: list[Frame], spec: PillarSpec, head_classes: dict, stride: int) -> dict:
+TargetsFn = Callable[[Boxes, Grid], dict]
+
+
+def collate(frames: list[Frame], spec: PillarSpec, head_classes: dict, stride: int,
+            targets_fn: TargetsFn | None = None, origin_input: bool = False) -> dict:
+    """Pillar tensors and stacked targets; `targets_fn(boxes, grid)` replaces the dense-head
+    targets of `head_classes` (e.g. CenterHead targets). `origin_input` adds inputs['origin'],
+    the window's (x_min, y_min) per sample, for networks that take it as a traced input."""
     inputs, stats = pillarize_frames(frames, spec)
-    targets = [detector_targets(f.boxes, head_classes, spec.grid, stride) for f in frames]
+    if origin_input:
+        origin = np.array([spec.grid.x_range[0], spec.grid.y_range[0]], np.float32)
+        inputs = {**inputs, "origin": np.tile(origin, (len(frames), 1))}
+    if targets_fn is None:
+        targets = [detector_targets(f.boxes, head_classes, spec.grid, stride) for f in frames]
+    else:
+        targets = [targets_fn(f.boxes, spec.grid) for f in frames]
     return {"inputs": inputs, "targets": jax.tree.map(lambda *x: np.stack(x), *targets), "stats": stats}
 
 
@@ -50,12 +63,14 @@ class BatchStream:
     """Batch `s`: frames of (seed, s) pillarized for window `window(s)` of `specs`."""
 
     def __init__(self, frames: Sequence[Frame], specs: list[PillarSpec] | PillarSpec, head_classes: dict,
-                 stride: int, batch_size: int, seed: int, augment_cfg: AugmentConfig | None = AugmentConfig()):
+                 stride: int, batch_size: int, seed: int, augment_cfg: AugmentConfig | None = AugmentConfig(),
+                 targets_fn: TargetsFn | None = None, origin_input: bool = False):
         if len(frames) < batch_size:
             raise ValueError(f"{len(frames)} training frames cannot fill a batch of {batch_size}")
         self.specs = specs if isinstance(specs, list) else [specs]
         self.frames, self.head_classes, self.stride = frames, head_classes, stride
         self.batch_size, self.seed, self.augment_cfg = batch_size, seed, augment_cfg
+        self.targets_fn, self.origin_input = targets_fn, origin_input
         self.per_epoch = len(frames) // batch_size
 
     def indices(self, step: int) -> np.ndarray:
@@ -71,4 +86,5 @@ class BatchStream:
         frames = [self.frames[int(i)] for i in self.indices(step)]
         if self.augment_cfg is not None:
             frames = [augment(f, self.augment_cfg, rng) for f in frames]
-        return collate(frames, self.specs[self.window(step)], self.head_classes, self.stride)
+        return collate(frames, self.specs[self.window(step)], self.head_classes, self.stride, self.targets_fn,
+                       self.origin_input)

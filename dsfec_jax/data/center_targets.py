@@ -53,3 +53,57 @@ def draw_gaussian(heatmap_HxW: np.ndarray, row: int, col: int, radius: int) -> n
     window = heatmap_HxW[row - top:row + bottom, col - left:col + right]
     np.maximum(window, g[radius - top:radius + bottom, radius - left:radius + right], out=window)
     return heatmap_HxW
+
+
+MAX_OBJECTS = 128  # regression slots per frame; further objects keep their heatmap peak only
+BOX_TARGET = ("dx", "dy", "z", "log_w", "log_l", "log_h", "sin_yaw", "cos_yaw")
+
+
+def center_head_targets(boxes, classes: tuple[str, ...], grid, stride: int, max_objects: int = MAX_OBJECTS) -> dict:
+    """CenterHead training targets of one frame at `stride` grid cells per map cell.
+
+    hm (H, W, C) class Gaussians; corner_hm (H, W, 1) Gaussians of half the radius at each box's
+    centre and its 4 edge midpoints; per regression slot k < max_objects: ind (flat cell index
+    i * W + j), mask, box (8: sub-cell offset, centre z, log sizes, sin/cos yaw) and gt_box
+    (x, y, z, w, l, h, yaw) for the IoU terms; origin, the grid's (x_min, y_min), so one compiled
+    loss serves every training window. Rows of the map run along x, columns along y."""
+    nx, ny = grid.shape
+    h, w = nx // stride, ny // stride
+    step = grid.cell * stride
+    out = {"hm": np.zeros((h, w, len(classes)), np.float32), "corner_hm": np.zeros((h, w, 1), np.float32),
+           "ind": np.zeros(max_objects, np.int32), "mask": np.zeros(max_objects, bool),
+           "box": np.zeros((max_objects, len(BOX_TARGET)), np.float32), "gt_box": np.zeros((max_objects, 7), np.float32),
+           "origin": np.array([grid.x_range[0], grid.y_range[0]], np.float32)}
+    k = 0
+    for n in range(len(boxes.names)):
+        if boxes.names[n] not in classes:
+            continue
+        fx = (boxes.center[n, 0] - grid.x_range[0]) / step
+        fy = (boxes.center[n, 1] - grid.y_range[0]) / step
+        i, j = int(np.floor(fx)), int(np.floor(fy))
+        if not (0 <= i < h and 0 <= j < w):
+            continue
+        bw, bl, bh = (float(v) for v in boxes.size[n])
+        yaw = float(boxes.yaw[n])
+        radius = heatmap_radius(bl / step, bw / step)
+        draw_gaussian(out["hm"][:, :, classes.index(boxes.names[n])], i, j, radius)
+        _draw_corners(out["corner_hm"][:, :, 0], fx, fy, bw / step, bl / step, yaw, max(radius // 2, 1))
+        if k < max_objects:
+            out["ind"][k], out["mask"][k] = i * w + j, True
+            out["box"][k] = [fx - i, fy - j, boxes.center[n, 2], np.log(bw), np.log(bl), np.log(bh),
+                             np.sin(yaw), np.cos(yaw)]
+            out["gt_box"][k] = [*boxes.center[n], bw, bl, bh, yaw]
+            k += 1
+    return out
+
+
+def _draw_corners(heatmap_HxW, fx: float, fy: float, w_cells: float, l_cells: float, yaw: float, radius: int):
+    """The box centre and its 4 edge midpoints (front/back along the heading, left/right across)."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    h, w = heatmap_HxW.shape
+    for along, across in ((0, 0), (0.5, 0), (-0.5, 0), (0, 0.5), (0, -0.5)):
+        px = fx + along * l_cells * c - across * w_cells * s
+        py = fy + along * l_cells * s + across * w_cells * c
+        i, j = int(np.floor(px)), int(np.floor(py))
+        if 0 <= i < h and 0 <= j < w:
+            draw_gaussian(heatmap_HxW, i, j, radius)

@@ -19,15 +19,17 @@ from .fec import FEC
 NEG = -1e9  # masked-out points never win the max; finite so gradients stay finite
 
 
-def decorate_points(points_BxPxNxF, mask_BxPxN, coords_BxPx2, grid: Grid):
-    """Append offsets to the pillar's point mean (3) and to the pillar centre (3)."""
+def decorate_points(points_BxPxNxF, mask_BxPxN, coords_BxPx2, grid: Grid, origin_Bx2=None):
+    """Append offsets to the pillar's point mean (3) and to the pillar centre (3). `origin_Bx2`
+    (traced) replaces the grid's (x_min, y_min) per sample: one compiled network then serves
+    every training window of the same shape."""
     m = mask_BxPxN[..., None].astype(points_BxPxNxF.dtype)
     xyz = points_BxPxNxF[..., :3]
     count = jnp.maximum(m.sum(axis=2, keepdims=True), 1.0)
     mean_xyz = (xyz * m).sum(axis=2, keepdims=True) / count
-    centre_xy = (coords_BxPx2.astype(xyz.dtype) + 0.5) * grid.cell + jnp.array(
-        [grid.x_range[0], grid.y_range[0]], xyz.dtype
-    )
+    origin = (jnp.array([grid.x_range[0], grid.y_range[0]], xyz.dtype) if origin_Bx2 is None
+              else origin_Bx2[:, None, :].astype(xyz.dtype))
+    centre_xy = (coords_BxPx2.astype(xyz.dtype) + 0.5) * grid.cell + origin
     centre = jnp.concatenate([centre_xy, jnp.full_like(centre_xy[..., :1], grid.z_center)], -1)
     feats = jnp.concatenate([points_BxPxNxF, xyz - mean_xyz, xyz - centre[:, :, None, :]], -1)
     return feats * m  # padding slots are exactly zero
@@ -61,8 +63,8 @@ class PillarFeatureNet(nn.Module):
     act: str = "relu"
 
     @nn.compact
-    def __call__(self, points_BxPxNxF, mask_BxPxN, coords_BxPx2, train: bool = False):
-        x = decorate_points(points_BxPxNxF, mask_BxPxN, coords_BxPx2, self.grid)
+    def __call__(self, points_BxPxNxF, mask_BxPxN, coords_BxPx2, train: bool = False, origin_Bx2=None):
+        x = decorate_points(points_BxPxNxF, mask_BxPxN, coords_BxPx2, self.grid, origin_Bx2)
         if self.encoder == "fec":
             h = FEC(tuple(self.filters), self.act, name="fec")(x, mask_BxPxN, train)
         elif self.encoder == "pointpillars":

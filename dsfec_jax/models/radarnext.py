@@ -20,7 +20,9 @@ from .pillar_inputs import random_pillar_inputs
 from .radarnext_necks import DCN_POSITIONS, SECONDFPN, PANeck
 
 VOD_FEATURES = ("x", "y", "z", "rcs", "v_r", "v_r_comp", "time")
-VOD_CLASSES = ("Pedestrian", "Cyclist", "Car")  # the head's channel order in the public config
+# The public config's heatmap order (Pedestrian, Cyclist, Car) in the project's canonical class
+# names: VoD's "Cyclist" (a bicycle with its rider) is "bicycle" here, as in data.sources.CLASS_MAP.
+VOD_CLASSES = ("pedestrian", "bicycle", "car")
 NECKS = ("fpn", "pan", "mdfen")
 BACKBONES = ("rep_dwc", "dense")
 
@@ -147,9 +149,10 @@ class RadarNeXtNet(nn.Module):
                                c.depthwise_impl)
         self.head = CenterHead(len(c.classes), c.head_width, c.corner_head)
 
-    def encode(self, points, mask, coords, train: bool = False):
-        """Pillar feature net + scatter: the BEV pseudo-image (B, nx, ny, 64)."""
-        return scatter_to_bev(self.pillar_net(points, mask, coords, train), coords, self.cfg.grid)
+    def encode(self, points, mask, coords, train: bool = False, origin=None):
+        """Pillar feature net + scatter: the BEV pseudo-image (B, nx, ny, 64). `origin` (B, 2), if
+        given, is each sample's grid (x_min, y_min): a training window's, without a recompile."""
+        return scatter_to_bev(self.pillar_net(points, mask, coords, train, origin), coords, self.cfg.grid)
 
     def backbone(self, image, train: bool = False) -> list:
         return self.backbone_net(image, train)
@@ -157,8 +160,8 @@ class RadarNeXtNet(nn.Module):
     def detect(self, stages: list, train: bool = False) -> dict:
         return self.head(self.neck(stages, train), train)
 
-    def __call__(self, points, mask, coords, train: bool = False):
-        return self.detect(self.backbone(self.encode(points, mask, coords, train), train), train)
+    def __call__(self, points, mask, coords, train: bool = False, origin=None):
+        return self.detect(self.backbone(self.encode(points, mask, coords, train, origin), train), train)
 
 
 def deploy_config(cfg: RadarNeXtConfig) -> RadarNeXtConfig:

@@ -3,7 +3,8 @@
 `paper` is DSFEC §4.1: Adam (beta1 0.9) with decoupled weight decay 0.01, initial learning rate
 0.00348, piecewise-constant decay after 400 warm-up iterations, batch 24, 30 epochs. The paper
 does not give the decay boundaries; we decay x0.1 at 2/3 and 8/9 of training (the usual
-"epochs 20 and 27 of 30" choice). `quick` is a short CPU schedule for a useful model in minutes.
+"epochs 20 and 27 of 30" choice). `quick` is a short CPU schedule for a useful model in minutes. `radarnext` is RadarNeXt's
+published schedule (the warm-up length is ours).
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ class Schedule:
 SCHEDULES = {
     "paper": Schedule("paper", 0.00348, 400, 24, epochs=30),
     "quick": Schedule("quick", 0.002, 50, 8, steps=600),
+    # RadarNeXt's public config: AdamW lr 3e-3, wd 0.01, clip 10, x0.1 at epochs 35 and 45 of 80, batch 8
+    "radarnext": Schedule("radarnext", 0.003, 100, 8, epochs=80, decay_at=(35 / 80, 45 / 80)),
 }
 
 

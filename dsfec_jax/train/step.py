@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
+from .center_losses import center_head_loss
 from .losses import LossConfig, detection_loss
 from .warm_start import warm_start
 
@@ -25,11 +26,20 @@ def init_state(detector, tx: optax.GradientTransformation, rng: jax.Array,
             "opt_state": tx.init(variables["params"]), "step": jnp.zeros((), jnp.int32)}
 
 
+def family_loss(detector, loss_cfg: LossConfig = LossConfig()):
+    """(outputs, targets) -> (loss, parts) for the detector's head: dense PIXOR heads or CenterHead."""
+    if detector.config.family == "radarnext":
+        return lambda outputs, targets: center_head_loss(outputs, targets, detector.config)
+    return lambda outputs, targets: detection_loss(outputs, targets, loss_cfg)
+
+
 def make_train_step(detector, tx: optax.GradientTransformation, loss_cfg: LossConfig = LossConfig()):
+    compute_loss = family_loss(detector, loss_cfg)
+
     def loss_fn(params, batch_stats, batch):
         variables = {"params": params, "batch_stats": batch_stats}
         outputs, updates = detector.apply(variables, batch["inputs"], train=True)
-        loss, parts = detection_loss(outputs, batch["targets"], loss_cfg)
+        loss, parts = compute_loss(outputs, batch["targets"])
         return loss, (parts, updates["batch_stats"])
 
     def train_step(state: dict, batch: dict):

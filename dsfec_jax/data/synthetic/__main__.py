@@ -1,4 +1,4 @@
-"""python -m dsfec_jax.data.synthetic [--split train] [--frames 500] [--difficulty normal] [--png bev.png]
+"""python -m dsfec_jax.data.synthetic [--profile nuscenes|4d] [--split train] [--frames 500] [--difficulty normal]
 
 Prints the statistics of a synthetic split (and, with --bench N, generation frames/s on this
 core); optionally writes one frame's BEV picture and/or the frames to a cache directory.
@@ -10,18 +10,20 @@ import argparse
 import json
 
 from .bev_png import save_bev_png
-from .config import DIFFICULTIES, SyntheticConfig
+from .config import DIFFICULTIES, SyntheticConfig, radar4d_config
 from .dataset import SPLITS, SyntheticDataset, write_cache
 from .stats import dataset_stats, format_stats, throughput
 
 
 def parse(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m dsfec_jax.data.synthetic", description=__doc__.splitlines()[0])
+    p.add_argument("--profile", default="nuscenes", choices=("nuscenes", "4d"),
+                   help="nuscenes: the default ARS408-like sensor; 4d: the VoD-like 4D imaging radar")
     p.add_argument("--split", default="train", choices=SPLITS)
     p.add_argument("--frames", type=int, default=500)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--difficulty", default="normal", choices=sorted(DIFFICULTIES))
-    p.add_argument("--sweeps", type=int, default=SyntheticConfig.num_sweeps)
+    p.add_argument("--sweeps", type=int, default=None, help="accumulated sweeps (default: the profile's)")
     p.add_argument("--json", action="store_true", help="print the statistics as JSON")
     p.add_argument("--bench", type=int, default=0, help="also time generating this many frames")
     p.add_argument("--png", default=None, help="write the BEV picture of frame --png-index here")
@@ -32,7 +34,9 @@ def parse(argv=None) -> argparse.Namespace:
 
 def main(argv=None) -> None:
     args = parse(argv)
-    cfg = SyntheticConfig(difficulty=args.difficulty, num_sweeps=args.sweeps)
+    make = radar4d_config if args.profile == "4d" else SyntheticConfig
+    sweeps = {} if args.sweeps is None else {"num_sweeps": args.sweeps}
+    cfg = make(difficulty=args.difficulty, **sweeps)
     ds = SyntheticDataset(cfg, args.split, args.seed, args.frames)
     stats = dataset_stats(ds)
     print(json.dumps(stats, indent=2) if args.json else format_stats(stats))

@@ -106,7 +106,10 @@ class _Canvas:
         if "point_source" in frame.meta:
             colors = SOURCE_COLORS[np.asarray(frame.meta["point_source"])]
         else:
-            speed = np.hypot(frame.column("vx_comp"), frame.column("vy_comp"))
+            if "v_r_comp" in frame.point_features:  # VoD columns: a signed radial speed
+                speed = np.abs(frame.column("v_r_comp"))
+            else:
+                speed = np.hypot(frame.column("vx_comp"), frame.column("vy_comp"))
             heat = np.clip(speed / 10.0, 0, 1)[:, None]
             colors = ((1 - heat) * [90, 140, 220] + heat * [255, 80, 40]).astype(np.uint8)
         size = max(1, int(round(self.ppm / 4)))

@@ -24,6 +24,8 @@ RCS_SIGMA = np.array([4.0, 5.0, 3.0])
 FLAT = np.array([True, True, False])
 MAX_SLOTS = 96
 REFLECTORS = (WALL_KINDS.index("rail"), WALL_KINDS.index("building"))
+RAIL = WALL_KINDS.index("rail")
+RAIL_TOP = 1.5  # m above the ground: the highest a rail scatterer sits, whatever structure_top_m
 FA_RCS = (-13.0, 9.0)
 FA_RANDOM_DOPPLER = 0.25  # share of false alarms at a random Doppler bin
 FA_DOPPLER_SPAN = 15.0    # m/s, half-width of that random Doppler
@@ -31,7 +33,8 @@ FA_DOPPLER_SPAN = 15.0    # m/s, half-width of that random Doppler
 
 def structure_echoes(rng: np.random.Generator, cfg: SyntheticConfig, layout: Layout, sweeps: Sweeps,
                      ground_z: float) -> Echoes:
-    q, kind, normal = _scatterers(rng, layout.walls, cfg.level.clutter)
+    q, kind, normal = _scatterers(rng, layout.walls, cfg.level.clutter * cfg.clutter_scale,
+                                  round(MAX_SLOTS * cfg.clutter_scale))
     r, az = polar(q[None], sweeps.pos[:, None, :])                                   # (S, Q)
     rcs = RCS_MEAN[kind] + rng.standard_normal(r.shape) * RCS_SIGMA[kind]
     cos_inc = np.abs(np.cos(az) * normal[:, 0] + np.sin(az) * normal[:, 1])
@@ -40,16 +43,21 @@ def structure_echoes(rng: np.random.Generator, cfg: SyntheticConfig, layout: Lay
     k, i = np.nonzero(hit)
     n = len(k)
     xy = q[i] + rng.standard_normal((n, 2)) * 0.15  # the scattering centre wanders over a post or facade
-    return Echoes(xy, ground_z + rng.uniform(0.3, 1.5, n), k, np.zeros((n, 2)), rcs[k, i],
+    # Rails are low; facades and poles show scatterers as high as the sensor resolves them.
+    top = np.where(kind[i] == RAIL, min(RAIL_TOP, cfg.structure_top_m), cfg.structure_top_m)
+    return Echoes(xy, ground_z + rng.uniform(0.3, top, n), k, np.zeros((n, 2)), rcs[k, i],
                   np.full(n, -1), np.full(n, 1, np.int8), np.zeros(n))
 
 
-def _scatterers(rng, walls: Lines, density: float):
-    """Fixed scatterer positions along the walls, stratified with jitter: (Q, 2), kind, normal."""
+def _scatterers(rng, walls: Lines, density: float, max_slots: int = MAX_SLOTS):
+    """Fixed scatterer positions along the walls, stratified with jitter: (Q, 2), kind, normal.
+
+    At most max_slots per wall: a denser clutter_scale brings proportionally more slots, so the
+    stretch of wall they cover stays what it is without it."""
     if len(walls) == 0:
         return np.zeros((0, 2)), np.zeros(0, int), np.zeros((0, 2))
     spacing = (SPACING / np.where(FLAT, density, 1.0))[walls.kind]
-    slots = walls.s_lo[:, None] + (np.arange(MAX_SLOTS) + rng.random((len(walls), MAX_SLOTS))) * spacing[:, None]
+    slots = walls.s_lo[:, None] + (np.arange(max_slots) + rng.random((len(walls), max_slots))) * spacing[:, None]
     keep = (slots <= walls.s_hi[:, None]) & ((slots < walls.ex_lo[:, None]) | (slots > walls.ex_hi[:, None]))
     w, _ = np.nonzero(keep)
     d = walls.direction()[w]

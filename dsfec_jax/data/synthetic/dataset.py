@@ -26,7 +26,7 @@ from ... import __version__
 from ... import atomic
 from ...atomic import write_json
 from ..frame import Boxes, Frame
-from .config import FORMAT_VERSION, RADAR_FEATURES, SyntheticConfig
+from .config import FORMAT_VERSION, SyntheticConfig
 from .simulate import simulate
 
 SPLITS = ("train", "val", "test")
@@ -94,7 +94,7 @@ def write_cache(dataset: SyntheticDataset, directory: str | os.PathLike) -> Path
     write_json(directory / MANIFEST, dict(
         format=CACHE_FORMAT, format_version=FORMAT_VERSION, dsfec_jax_version=__version__,
         numpy_version=np.__version__, config=dataset.cfg.to_dict(), split=dataset.split, seed=dataset.seed,
-        count=len(files), point_features=list(RADAR_FEATURES), files=files))
+        count=len(files), point_features=list(dataset.cfg.point_features), files=files))
     return directory
 
 
@@ -133,7 +133,8 @@ def read_manifest(directory: Path) -> dict:
     if m.get("format") != CACHE_FORMAT or m.get("format_version") != FORMAT_VERSION:
         raise ValueError(f"{path}: format {m.get('format')!r} v{m.get('format_version')}; "
                          f"this code reads {CACHE_FORMAT!r} v{FORMAT_VERSION}")
-    if tuple(m["point_features"]) != RADAR_FEATURES or m["count"] != len(m["files"]):
+    features = SyntheticConfig.from_dict(m["config"]).point_features
+    if tuple(m["point_features"]) != features or m["count"] != len(m["files"]):
         raise ValueError(f"{path}: inconsistent manifest (features {m['point_features']}, "
                          f"count {m['count']} for {len(m['files'])} files)")
     missing = [f for f in m["files"] if not (Path(directory) / f).is_file()]

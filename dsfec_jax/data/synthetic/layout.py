@@ -71,8 +71,8 @@ class _LineList:
                      np.array(ex_hi), np.array(kind, int), np.array(travel, int))
 
 
-def sample_layout(rng: np.random.Generator, s_span=(-15.0, 100.0)) -> Layout:
-    highway = bool(rng.random() < 0.35)
+def sample_layout(rng: np.random.Generator, s_span=(-15.0, 100.0), highway_prob: float = 0.35) -> Layout:
+    highway = bool(rng.random() < highway_prob)  # drawn even at 0 or 1: the stream stays aligned
     psi = float(rng.normal(0.0, np.deg2rad(1.5)))
     rows, walls = _LineList(psi), _LineList(psi)
     n_fwd = int(rng.integers(2, 4) if highway else rng.integers(1, 3))

@@ -33,8 +33,10 @@ def object_echoes(rng: np.random.Generator, cfg: SyntheticConfig, actors: Actors
     w, l = actors.size[:, 0], actors.size[:, 1]
     sb, cb = np.sin(beta), np.cos(beta)
     silhouette = l * np.abs(sb) + w * np.abs(cb)         # width seen from the sensor
-    cap = 1.0 + PER_M[actors.cls] * silhouette
-    raw = PER_M2[actors.cls] * 10 ** (rcs_db / 10) * (R_REF / r) ** 2
+    # An imaging radar detects more weak scatterers (more channels, more integration gain:
+    # density_scale) and separates more of them along an outline (finer bins: resolution_scale).
+    cap = 1.0 + cfg.resolution_scale * PER_M[actors.cls] * silhouette
+    raw = cfg.density_scale * PER_M2[actors.cls] * 10 ** (rcs_db / 10) * (R_REF / r) ** 2
     lam = cap * -np.expm1(-raw / cap)                    # saturates at the resolution limit
     count = np.where(seen, 1 + rng.poisson(lam), 0)
     flat = np.repeat(np.arange(count.size), count.ravel())

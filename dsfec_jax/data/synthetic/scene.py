@@ -26,10 +26,36 @@ _ROW_TABLE = {
     "crosswalk": ((0.0, 0.0, 1.0, 0.0), 5.0, 0.5, 10.0, 0.8),
 }
 _HIGHWAY_LANE = ((0.75, 0.25, 0.0, 0.0), 35.0)
+# View-of-Delft's old town (assumed numbers; VoD: pedestrians and cyclists dominate, cars are
+# common, trucks rare; its 3 example frames hold 16 pedestrians, 8 cyclists, 15 parked bicycles
+# and 1 car): cyclists share the lanes, bicycles stand parked along the kerb, busy bike lanes
+# and crowded sidewalks, and no highway.
+_VOD_ROWS = {
+    "lane": ((0.55, 0.02, 0.0, 0.43), 15.0),
+    "parking": ((0.50, 0.0, 0.0, 0.50), 1.5),
+    "bike": ((0.0, 0.0, 0.0, 1.0), 12.0),
+    "sidewalk": ((0.0, 0.0, 0.85, 0.15), 4.0),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class TrafficMix:
+    """Per row kind (index ROW_KINDS): class mix, mean gap (m), occupancy; and the highway share."""
+
+    mix: np.ndarray        # (K, 4)
+    gap: np.ndarray        # (K,)
+    occupancy: np.ndarray  # (K,)
+    highway_prob: float
+
+
+def _traffic_mix(overrides: dict, highway_prob: float) -> TrafficMix:
+    rows = [(*overrides.get(k, _ROW_TABLE[k][:2]), _ROW_TABLE[k][2]) for k in ROW_KINDS]
+    return TrafficMix(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
+                      np.array([r[2] for r in rows]), highway_prob)
+
+
+TRAFFIC_MIXES = {"nuscenes": _traffic_mix({}, 0.35), "vod": _traffic_mix(_VOD_ROWS, 0.0)}
 _TABLE = [_ROW_TABLE[k] for k in ROW_KINDS]
-MIX = np.array([t[0] for t in _TABLE])
-GAP = np.array([t[1] for t in _TABLE])
-OCCUPANCY = np.array([t[2] for t in _TABLE])
 YAW_NOISE = np.deg2rad([t[3] for t in _TABLE])
 LATERAL = np.array([t[4] for t in _TABLE])
 SIZE_MEAN = np.array([CLASS_PROFILES[c].size_mean for c in CLASSES])
@@ -82,10 +108,11 @@ class Scene:
 
 
 def sample_scene(rng: np.random.Generator, cfg: SyntheticConfig) -> Scene:
-    layout = sample_layout(rng)
+    traffic = TRAFFIC_MIXES[cfg.traffic_mix]
+    layout = sample_layout(rng, highway_prob=traffic.highway_prob)
     lanes = layout.rows.kind == LANE
     jam = lanes & (rng.random(len(lanes)) < (0.05 if layout.highway else 0.25))  # queued lanes barely move
-    actors = _place_actors(rng, layout, jam, cfg.level.traffic, -cfg.sensor_height_m)
+    actors = _place_actors(rng, layout, jam, cfg.level.traffic, -cfg.sensor_height_m, traffic)
     return Scene(layout, actors, _sample_ego(rng, layout.highway))
 
 
@@ -97,10 +124,11 @@ def _sample_ego(rng, highway: bool) -> EgoMotion:
     return EgoMotion(float(speed), float(rng.normal(0.0, 0.02)))
 
 
-def _place_actors(rng, layout: Layout, jam: np.ndarray, traffic: float, ground_z: float) -> Actors:
+def _place_actors(rng, layout: Layout, jam: np.ndarray, traffic: float, ground_z: float,
+                  table: TrafficMix = TRAFFIC_MIXES["nuscenes"]) -> Actors:
     rows = layout.rows
     kind = rows.kind
-    mix, gap = MIX[kind], GAP[kind].copy()
+    mix, gap = table.mix[kind], table.gap[kind].copy()
     lane = kind == LANE
     if layout.highway:
         mix[lane], gap[lane] = _HIGHWAY_LANE
@@ -112,7 +140,7 @@ def _place_actors(rng, layout: Layout, jam: np.ndarray, traffic: float, ground_z
     s = rows.s_lo[:, None] - rng.random(len(rows))[:, None] * gap[:, None] + np.cumsum(step, 1) - size[..., 1] / 2
     half = size[..., 1] / 2
     keep = ((s + half <= rows.s_hi[:, None]) & ((s + half < rows.ex_lo[:, None]) | (s - half > rows.ex_hi[:, None]))
-            & (rng.random(shape) < OCCUPANCY[kind][:, None]))
+            & (rng.random(shape) < table.occupancy[kind][:, None]))
     r, _ = np.nonzero(keep)
     cls, size, s, k = cls[keep], size[keep], s[keep], kind[r]
     lateral = rng.standard_normal(len(r)) * LATERAL[k]
