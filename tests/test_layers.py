@@ -172,3 +172,13 @@ def test_dcnv3_layer_shapes_and_zero_initialised_offsets():
     assert np.any(grads["params"]["offset"]["kernel"])  # offsets learn through the bilinear weights
     with pytest.raises(ValueError, match="multiple of groups"):
         DCNv3(18, groups=4).init(jax.random.key(1), jax.numpy.zeros((1, 4, 4, 18)))
+
+
+def test_pointpillars_batch_norm_stays_finite_on_a_batch_without_points():
+    from dsfec_jax.layers.pillars import PointPillarsEncoder
+
+    enc = PointPillarsEncoder(8)
+    x, mask = jnp.zeros((2, 4, 3, 13)), jnp.zeros((2, 4, 3), bool)
+    variables = enc.init(jax.random.key(0), x, mask)
+    out, updates = enc.apply(variables, x, mask, train=True, mutable=["batch_stats"])
+    assert bool(jnp.isfinite(out).all()) and all(bool(jnp.isfinite(v).all()) for v in jax.tree.leaves(updates))

@@ -50,7 +50,10 @@ class PointPillarsEncoder(nn.Module):
     @nn.compact
     def __call__(self, x_BxPxNxD, mask_BxPxN, train: bool = False):
         x = PointLinear(self.features, use_bias=False, name="linear")(x_BxPxNxD)
-        x = batch_norm(train, "bn")(x, mask=mask_BxPxN[..., None])
+        # a batch without a single point (a training window outside a narrow field of view)
+        # would give BN statistics of 0/0 = NaN: let it see the zero slots instead
+        bn_mask = jnp.where(mask_BxPxN.any(), mask_BxPxN, True)
+        x = batch_norm(train, "bn")(x, mask=bn_mask[..., None])
         return activation(self.act)(x)
 
 

@@ -62,7 +62,8 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
         m = result.pop("metrics")
         return {**result, "class_mAP": m["class_mAP"], "AP@4": m.get("AP@4", {})}
 
-    state, scores = train(det, stream, spec, info, validate, eval_every or total,
+    # with origin inputs one network shaped like a window (windows[0]) trains on every window
+    state, scores = train(windows[0] if center else det, stream, spec, info, validate, eval_every or total,
                           window_detectors=None if center else windows,
                           init_variables=init_variables, best_key="mAP" if center else "car_mAP")
     return det, state, scores if scores is not None else validate(state)
