@@ -13,6 +13,18 @@ import jax
 import jax.numpy as jnp
 
 
+def decode_codes(code_BxKx8, cell_BxK, width: int, step: float, origin_Bx2):
+    """(x, y, z, w, l, h, yaw) of box codes (offset, z, log sizes, sin, cos) at flat cells
+    i * width + j of a map whose cells are `step` metres, per-sample origin (x_min, y_min)."""
+    i, j = (cell_BxK // width).astype(code_BxKx8.dtype), (cell_BxK % width).astype(code_BxKx8.dtype)
+    origin = jnp.asarray(origin_Bx2, code_BxKx8.dtype)
+    x = (i + code_BxKx8[..., 0]) * step + origin[:, 0:1]
+    y = (j + code_BxKx8[..., 1]) * step + origin[:, 1:2]
+    size = jnp.exp(jnp.clip(code_BxKx8[..., 3:6], -5.0, 5.0))  # bounded: a wild early step cannot overflow
+    yaw = jnp.arctan2(code_BxKx8[..., 6], code_BxKx8[..., 7])
+    return jnp.concatenate([x[..., None], y[..., None], code_BxKx8[..., 2:3], size, yaw[..., None]], -1)
+
+
 def decode_center_head(outputs: dict, grid, stride: int, top_k: int = 500):
     """-> boxes (B, K, 7), scores (B, K), labels (B, K) int32."""
     hm = jax.nn.sigmoid(outputs["hm"])
@@ -24,13 +36,9 @@ def decode_center_head(outputs: dict, grid, stride: int, top_k: int = 500):
         m = outputs[name]
         return jnp.take_along_axis(m.reshape(b, h * w, m.shape[-1]), cell[..., None], axis=1)
 
-    reg, z, dims, rot, iou = at("reg"), at("height"), at("dim"), at("rot"), at("iou")[..., 0]
-    step = grid.cell * stride
-    i, j = (cell // w).astype(hm.dtype), (cell % w).astype(hm.dtype)
-    x = (i + reg[..., 0]) * step + grid.x_range[0]
-    y = (j + reg[..., 1]) * step + grid.y_range[0]
-    size = jnp.exp(jnp.clip(dims, -5.0, 5.0))
-    yaw = jnp.arctan2(rot[..., 0], rot[..., 1])
-    boxes = jnp.concatenate([x[..., None], y[..., None], z, size, yaw[..., None]], -1)
+    code = jnp.concatenate([at("reg"), at("height"), at("dim"), at("rot")], -1)
+    iou = at("iou")[..., 0]
+    origin = jnp.broadcast_to(jnp.array([grid.x_range[0], grid.y_range[0]], hm.dtype), (b, 2))
+    boxes = decode_codes(code, cell, w, grid.cell * stride, origin)
     quality = (jnp.clip(iou, -1.0, 1.0) + 1) / 2
     return boxes, jnp.sqrt(heat) * jnp.sqrt(quality), labels.astype(jnp.int32)

@@ -16,6 +16,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 
+from ..boxes.center_decode import decode_codes as decode_at
 from ..boxes.rotated_iou_jax import iou_3d_aligned
 
 EPS = 1e-4
@@ -42,18 +43,6 @@ def cornernet_focal_loss(logits, target, alpha: float = 2.0, beta: float = 4.0):
 def gather_cells(map_BxHxWxC, ind_BxK):
     b, h, w, c = map_BxHxWxC.shape
     return jnp.take_along_axis(map_BxHxWxC.reshape(b, h * w, c), ind_BxK[..., None], axis=1)
-
-
-def decode_at(box_BxKx8, ind_BxK, width: int, step: float, origin_Bx2):
-    """(x, y, z, w, l, h, yaw) of predicted box codes at flat cells i * width + j; origin_Bx2 is
-    each sample's grid (x_min, y_min)."""
-    i, j = (ind_BxK // width).astype(box_BxKx8.dtype), (ind_BxK % width).astype(box_BxKx8.dtype)
-    origin = jnp.asarray(origin_Bx2, box_BxKx8.dtype)
-    x = (i + box_BxKx8[..., 0]) * step + origin[:, 0:1]
-    y = (j + box_BxKx8[..., 1]) * step + origin[:, 1:2]
-    size = jnp.exp(jnp.clip(box_BxKx8[..., 3:6], -5.0, 5.0))  # bounded so a wild early step cannot overflow
-    yaw = jnp.arctan2(box_BxKx8[..., 6], box_BxKx8[..., 7])
-    return jnp.concatenate([x[..., None], y[..., None], box_BxKx8[..., 2:3], size, yaw[..., None]], -1)
 
 
 def axis_aligned_diou(pred_Kx7, gt_Kx7):
