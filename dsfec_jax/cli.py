@@ -55,6 +55,8 @@ def parse(argv=None) -> argparse.Namespace:
     t.add_argument("--schedule", default="quick", choices=("quick", "paper", "radarnext"))
     t.add_argument("--steps", type=int, default=None, help="override the schedule's length")
     t.add_argument("--batch-size", type=int, default=None)
+    t.add_argument("--decay-at", default=None, metavar="F1,F2",
+                   help="fractions of training where the rate drops x0.1 (default: the schedule's)")
     t.add_argument("--val-frames", type=int, default=100)
     t.add_argument("--eval-every", type=int, default=200)
     t.add_argument("--no-augment", action="store_true")
@@ -114,9 +116,16 @@ def run_train(args) -> int:
     from . import zoo
 
     overrides = {"max_pillars": args.max_pillars or zoo.config(args.model).max_pillars, **parse_overrides(args.set)}
-    sched = get_schedule(args.schedule, **({"batch_size": args.batch_size} if args.batch_size else {}))
-    # RadarNeXt reads a source's own columns (VoD's 7, TJ4D's 8); DSFEC the nuScenes ones
-    features = "native" if zoo.config(args.model).family == "radarnext" else "dsfec"
+    changes = {"batch_size": args.batch_size} if args.batch_size else {}
+    if args.decay_at:
+        try:
+            changes["decay_at"] = tuple(float(f) for f in args.decay_at.split(","))
+        except ValueError:
+            sys.exit(f"--decay-at {args.decay_at!r}: expected fractions of training, e.g. 0.7,0.9")
+        if not all(0 < f < 1 for f in changes["decay_at"]):
+            sys.exit(f"--decay-at {args.decay_at!r}: each fraction must lie in (0, 1)")
+    sched = get_schedule(args.schedule, **changes)
+    features = zoo.input_columns(args.model)
     frames = load_frames(args.data, args.split, args.frames or (sched.batch_size * 100), args.seed, features=features)
     val = load_frames(args.data, "val", args.val_frames, args.seed, features=features)
     info = {"command": command_line(args),
@@ -130,7 +139,7 @@ def run_train(args) -> int:
 def run_eval_or_predict(args) -> int:
     from . import zoo
     from .data.sources import load_frames
-    from .evaluate import headline, predict_frames, score
+    from .evaluate import headline, predict_frames, score, score_vod
 
     if args.runtime == "onnx":
         from .deploy import OrtPredictor
@@ -143,20 +152,26 @@ def run_eval_or_predict(args) -> int:
         overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
         predictor = zoo.load(args.model, weights=args.weights,
                              predictor_options={"score_threshold": args.score_threshold}, **overrides)
-    frames = load_frames(args.data, args.split, args.frames, args.seed)
+    frames = load_frames(args.data, args.split, args.frames, args.seed, features=zoo.input_columns(args.model))
     detections = predict_frames(predictor, frames)
     if args.command == "predict":
         write_predictions(args, frames, detections, predictor)
-    metrics = score(frames, detections, grid=predictor.spec.grid)
-    result = {"model": args.model, "runtime": args.runtime,
-              "weights": str(args.onnx if args.runtime == "onnx" else args.weights or zoo.shipped_weights(args.model)),
-              "data": args.data, "split": args.split, "seed": args.seed, "frames": len(frames),
-              **headline(metrics), "metrics": metrics}
+    weights = str(args.onnx if args.runtime == "onnx" else args.weights or zoo.shipped_weights(args.model))
+    result = {"model": args.model, "runtime": args.runtime, "weights": weights, "data": args.data,
+              "split": args.split, "seed": args.seed, "frames": len(frames)}
+    if zoo.config(args.model).family == "radarnext":  # the View-of-Delft / TJ4D 3D AP
+        result.update(protocol="vod", **score_vod(frames, detections, predictor.spec.grid, predictor.class_names))
+        summary = f"VoD 3D mAP {result['mAP']:.2f}  corridor {result['mAP_corridor']:.2f}  " + "  ".join(
+            f"{c} {ap:.2f}" for c, ap in result["AP"].items())
+    else:
+        metrics = score(frames, detections, grid=predictor.spec.grid)
+        result.update(protocol="nuscenes", **headline(metrics), metrics=metrics)
+        summary = (f"Car mAP {result['car_mAP']:.2f}  Car AP@4 {result['car_AP4']:.2f}  "
+                   f"mAP(all classes) {result['mAP']:.2f}")
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        print(f"{args.model} on {args.data}/{args.split} ({len(frames)} frames): Car mAP {result['car_mAP']:.2f}  "
-              f"Car AP@4 {result['car_AP4']:.2f}  mAP(all classes) {result['mAP']:.2f}")
+        print(f"{args.model} on {args.data}/{args.split} ({len(frames)} frames): {summary}")
     return 0
 
 

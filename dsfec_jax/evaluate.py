@@ -64,13 +64,23 @@ def _kitti_frame(boxes, scores=None) -> dict:
     return out
 
 
-def evaluate_vod(predictor, frames: Sequence[Frame], iou_thresholds=VOD_IOU) -> dict:
+def evaluate_vod(predictor, frames: Sequence[Frame], iou_thresholds: dict | None = None) -> dict:
+    """Predict `frames`, then `score_vod` them with the predictor's classes and grid."""
+    frames = [frames[i] for i in range(len(frames))]
+    return score_vod(frames, predict_frames(predictor, frames), predictor.spec.grid, predictor.class_names,
+                     iou_thresholds)
+
+
+def score_vod(frames: Sequence[Frame], detections: dict, grid, class_names, iou_thresholds: dict | None = None) -> dict:
     """The View-of-Delft protocol (3D AP, 11 recall points) in the entire area and the corridor:
     headline mAP (entire), mAP_corridor, per-class AP of both. Ground truth centred off the
-    detector's grid is left out, as in `score`."""
+    detector's grid is left out, as in `score`. The IoU thresholds default to VoD's / TJ4D's
+    for `class_names` (Car and Truck 0.5, Pedestrian and Cyclist 0.25); a class with no ground
+    truth has AP NaN and stays out of the mAP."""
+    if iou_thresholds is None:
+        iou_thresholds = {c: TJ4D_IOU[c] for c in class_names}
     frames = [frames[i] for i in range(len(frames))]
-    detections = predict_frames(predictor, frames)
-    gts = [_kitti_frame(in_grid(f.boxes, predictor.spec.grid)) for f in frames]
+    gts = [_kitti_frame(in_grid(f.boxes, grid)) for f in frames]
     dets = [_kitti_frame(detections[f.frame_id].boxes, detections[f.frame_id].scores) for f in frames]
     both = kitti3d.evaluate_vod(gts, dets, iou_thresholds)
     entire, corridor = both["entire"], both["corridor"]

@@ -19,6 +19,26 @@ from .data.pillarize import PillarSpec, pillarize, select_columns
 from .models.dsfec import HEAD_NAMES
 
 
+def head_classes(cfg) -> dict:
+    """Head name -> its classes: DSFEC's Car/Truck/VRU heads, or a CenterHead's single one."""
+    return {"center": tuple(cfg.classes)} if cfg.family == "radarnext" else dict(zip(HEAD_NAMES, cfg.head_classes))
+
+
+def decoder(cfg, top_k: int):
+    """fn(head outputs) -> (boxes, scores, labels): the top-k decoded candidates before NMS
+    (what the jitted predictors run after the network, and what `deploy.export` writes to ONNX)."""
+    if cfg.family == "radarnext":
+        return lambda maps: decode_center_head(maps, cfg.grid, cfg.output_stride, top_k)
+    cells, heads = cell_centres(cfg.grid, cfg.output_stride), head_classes(cfg)
+    return lambda maps: decode_heads(maps, heads, cells, top_k)
+
+
+def decoded_network(detector, top_k: int):
+    """fn(variables, inputs) -> (boxes, scores, labels): network then `decoder`."""
+    decode = decoder(detector.config, top_k)
+    return lambda v, x: decode(detector.apply(v, x))
+
+
 class Detections(NamedTuple):
     boxes: Boxes
     scores: np.ndarray
@@ -49,10 +69,18 @@ class HostPipeline:
         return [self._postprocess(b, s, l) for b, s, l in zip(boxes, scores, labels)]
 
     def _postprocess(self, boxes, scores, labels) -> Detections:
-        keep = batched_rotated_nms(boxes.astype(np.float64), scores, labels, self.nms_iou,
+        """Rotated NMS per class, then Boxes. The decoded width says what the network predicts:
+        5 columns (x, y, w, l, yaw: DSFEC's BEV heads; z and height from the class priors) or
+        7 (x, y, z, w, l, h, yaw: a CenterHead's 3D boxes, NMS on their BEV footprints)."""
+        full3d = boxes.shape[-1] == 7
+        bev = boxes[:, [0, 1, 3, 4, 6]] if full3d else boxes
+        keep = batched_rotated_nms(bev.astype(np.float64), scores, labels, self.nms_iou,
                                    max_output=self.max_boxes, score_threshold=self.score_threshold)
-        boxes, scores, labels = boxes[keep], scores[keep], labels[keep]
+        boxes, scores, labels = boxes[keep].astype(np.float32), scores[keep], labels[keep]
         names = np.array([self.class_names[i] for i in labels], dtype="<U16")
+        if full3d:
+            out = Boxes(boxes[:, :3], boxes[:, 3:6], boxes[:, 6], np.zeros((len(keep), 2), np.float32), names)
+            return Detections(out, scores.astype(np.float32))
         h = np.array([priors.height(n) for n in names], np.float32)
         z = np.array([priors.centre_z(n) for n in names], np.float32)
         out = Boxes(np.column_stack([boxes[:, :2], z]).astype(np.float32),
@@ -69,9 +97,8 @@ class Predictor(HostPipeline):
                  nms_iou: float = 0.2, max_boxes: int = 500):
         cfg = detector.config
         self.detector, self.variables = detector, variables
-        self._setup(PillarSpec.of(cfg), dict(zip(HEAD_NAMES, cfg.head_classes)), score_threshold, nms_iou, max_boxes)
-        cells = cell_centres(cfg.grid, cfg.output_stride)
-        self.network = jax.jit(lambda v, x: decode_heads(detector.apply(v, x), self.head_classes, cells, top_k))
+        self._setup(PillarSpec.of(cfg), head_classes(cfg), score_threshold, nms_iou, max_boxes)
+        self.network = jax.jit(decoded_network(detector, top_k))
 
     def run(self, batch: dict):
         return jax.device_get(self.network(self.variables, batch))
@@ -86,20 +113,11 @@ class CenterPredictor(HostPipeline):
                  nms_iou: float = 0.2, max_boxes: int = 83):
         cfg = detector.config
         self.detector, self.variables = detector, variables
-        self._setup(PillarSpec.of(cfg), {"center": tuple(cfg.classes)}, score_threshold, nms_iou, max_boxes)
-        self.network = jax.jit(lambda v, x: decode_center_head(detector.apply(v, x), cfg.grid, cfg.output_stride, top_k))
+        self._setup(PillarSpec.of(cfg), head_classes(cfg), score_threshold, nms_iou, max_boxes)
+        self.network = jax.jit(decoded_network(detector, top_k))
 
     def run(self, batch: dict):
         return jax.device_get(self.network(self.variables, batch))
-
-    def _postprocess(self, boxes, scores, labels) -> Detections:
-        bev = boxes[:, [0, 1, 3, 4, 6]].astype(np.float64)
-        keep = batched_rotated_nms(bev, scores, labels, self.nms_iou, max_output=self.max_boxes,
-                                   score_threshold=self.score_threshold)
-        b = boxes[keep].astype(np.float32)
-        names = np.array([self.class_names[i] for i in labels[keep]], dtype="<U16")
-        out = Boxes(b[:, :3], b[:, 3:6], b[:, 6], np.zeros((len(keep), 2), np.float32), names)
-        return Detections(out, scores[keep].astype(np.float32))
 
 
 def predictor_for(detector, variables, **options) -> HostPipeline:

@@ -91,6 +91,12 @@ def deploy(detector: Detector, variables: dict) -> tuple[Detector, dict]:
     return Detector(deploy_config(detector.config)), radarnext.deploy_variables(detector.config, variables)
 
 
+def input_columns(name: str) -> str:
+    """The point columns variant `name` reads from a source (data.sources.load_frames' features):
+    RadarNeXt a source's own ('native': VoD's 7, TJ4D's 8), DSFEC the nuScenes ones ('dsfec')."""
+    return "native" if config(name).family == "radarnext" else "dsfec"
+
+
 def create(name: str, /, **overrides) -> Detector:
     """A detector of the registered variant `name`, any config field overridden."""
     return Detector(config(name, **overrides))

@@ -7,9 +7,9 @@ import shlex
 import sys
 from pathlib import Path
 
-from dsfec_jax import atomic
+from dsfec_jax import atomic, zoo
 
-from .recipes import RECIPES
+from .recipes import RECIPES, get_recipe
 from .report import write_reports
 from .oneshot import run_oneshot, supernet_overrides
 from .runners import run_local, run_ray
@@ -21,7 +21,8 @@ def parser(prog: str, doc: str, base: str = "dsfec_l", strategy: str = "train") 
     p = argparse.ArgumentParser(prog=prog, description=doc.strip().splitlines()[0])
     p.add_argument("--base", default=base, help="registered model the candidates override")
     p.add_argument("--profile", default="quick", choices=sorted(RECIPES), help="training recipe per trial")
-    p.add_argument("--data", default="synthetic", help="synthetic | vod:PATH | tj4d:PATH | nuscenes:DATAROOT")
+    p.add_argument("--data", default=None, help="synthetic | synthetic4d | vod:PATH | tj4d:PATH | nuscenes:DATAROOT "
+                   "(default: the profile's benchmark, synthetic4d for RadarNeXt bases)")
     p.add_argument("--out", default=None, help="RUN_DIR (default runs/search/<name>); re-running resumes it")
     p.add_argument("--seeds", type=int, default=1, help="repeat each candidate with this many seeds")
     p.add_argument("--strategy", default=strategy, choices=("train", "oneshot"),
@@ -43,14 +44,20 @@ def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
 def run_search(args, name: str, candidates_fn, title: str, base_label: str | None) -> int:
     """Validate every candidate first, then run the missing trials and write the reports."""
     try:
+        recipe = get_recipe(args.profile, args.base)
         candidates = candidates_fn()
+        if args.strategy == "oneshot" and zoo.config(args.base).family != "dsfec":
+            raise SearchSpaceError(f"--strategy oneshot: the weight-sharing supernet is DSFEC's (elastic "
+                                   f"stage_blocks); {args.base!r} is a {zoo.config(args.base).family} model, "
+                                   "use --strategy train")
         if args.strategy == "oneshot":
             supernet_overrides(candidates)
             if args.backend != "local":
                 raise SearchSpaceError("--strategy oneshot trains one supernet in this process; "
                                        "--backend ray is for --strategy train")
-    except SearchSpaceError as err:
-        sys.exit(str(err))
+    except (SearchSpaceError, KeyError) as err:
+        sys.exit(str(err).strip("'\""))
+    args.data = args.data or recipe.data
     run_dir = Path(args.out or Path("runs") / "search" / name)
     command = f"{args.prog} " + " ".join(shlex.quote(a) for a in args.argv)
     atomic.write_json(run_dir / "search.json", {"title": title, "base": args.base, "base_label": base_label,

@@ -8,7 +8,7 @@ import json
 import sys
 
 from .journal import Journal
-from .report import rows
+from .report import headline, rows
 
 
 def kendall_tau(a: list[float], b: list[float]) -> float:
@@ -42,18 +42,21 @@ def tau_p_value(a: list[float], b: list[float], max_n: int = 8) -> float | None:
 
 
 def compare(run_a: str, run_b: str) -> dict:
-    ra = {r["label"]: r for r in rows(Journal(run_a).records())}
+    """Kendall tau of the two runs' rankings by their headline score (DSFEC: Car mAP; RadarNeXt:
+    VoD mAP) over the candidates both finished, and their costs."""
+    records_a = Journal(run_a).records()
+    score, _ = headline(records_a)
+    ra = {r["label"]: r for r in rows(records_a)}
     rb = {r["label"]: r for r in rows(Journal(run_b).records())}
-    labels = [lbl for lbl in ra if lbl in rb and ra[lbl]["car_mAP"] is not None and rb[lbl]["car_mAP"] is not None]
+    labels = [lbl for lbl in ra if lbl in rb and ra[lbl].get(score) is not None and rb[lbl].get(score) is not None]
     if len(labels) < 2:
         raise ValueError(f"{run_a} and {run_b} share fewer than two finished candidates")
     def cost(run, key):  # summed over the trials both runs share
         return sum(r.get(key) or 0 for r in Journal(run).records() if r["label"] in labels)
 
-    out = {"candidates": labels, "kendall_tau": kendall_tau([ra[x]["car_mAP"] for x in labels],
-                                                            [rb[x]["car_mAP"] for x in labels]),
-           "p_value": tau_p_value([ra[x]["car_mAP"] for x in labels], [rb[x]["car_mAP"] for x in labels]),
-           "car_mAP": {x: [ra[x]["car_mAP"], rb[x]["car_mAP"]] for x in labels}}
+    a_scores, b_scores = [ra[x][score] for x in labels], [rb[x][score] for x in labels]
+    out = {"candidates": labels, "kendall_tau": kendall_tau(a_scores, b_scores),
+           "p_value": tau_p_value(a_scores, b_scores), score: {x: [ra[x][score], rb[x][score]] for x in labels}}
     for key in ("wall_s", "cpu_s"):  # CPU seconds are the fairer cost when the machine is shared
         a, b = cost(run_a, key), cost(run_b, key)
         out[key] = {"a": round(a, 1), "b": round(b, 1)}

@@ -21,7 +21,7 @@ from .recipes import get_recipe
 def source_weights(base: str, overrides: dict, recipe: str) -> Path | None:
     """The weights file a trial of this (base, overrides, recipe) starts from, or None (scratch)."""
     path = zoo.shipped_weights(base)
-    if not get_recipe(recipe).warm_start or set(overrides) - {"stage_blocks"} or not path.is_file():
+    if not get_recipe(recipe, base).warm_start or set(overrides) - {"stage_blocks"} or not path.is_file():
         return None
     return path
 

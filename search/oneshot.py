@@ -143,7 +143,7 @@ def run_oneshot(base: str, trials: list[dict], run_dir: str | Path, retry_failed
 
 
 def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[str], log) -> None:
-    recipe, seed, data = get_recipe(trials[0]["recipe"]), trials[0]["seed"], trials[0]["data"]
+    recipe, seed, data = get_recipe(trials[0]["recipe"], base), trials[0]["seed"], trials[0]["data"]
     fixed = recipe.model_overrides()
     supernet = zoo.create(base, **supernet_overrides(trials), **fixed)
     frames = load_frames(data, "train", recipe.train_frames, seed=0)

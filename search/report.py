@@ -19,13 +19,31 @@ from dsfec_jax import atomic
 
 from .journal import Journal
 
+# (record key, column title, digits); the first column is the headline the plots and logs use
 COLUMNS = (("car_mAP", "Car mAP", 2), ("car_AP4", "Car AP@4", 2), ("mAP", "mAP (4 classes)", 2),
            ("gflops", "GFLOPs", 2), ("params", "Params (M)", 3), ("memory_mb", "Memory (MB)", 2),
            ("latency_ms", "Latency (ms)", 1))
+# RadarNeXt's tables (View-of-Delft 3D AP; params of the fused form; no stem-memory column)
+VOD_COLUMNS = (("mAP", "mAP (VoD 3D)", 2), ("mAP_corridor", "mAP corridor", 2), ("AP_car", "Car AP", 2),
+               ("AP_pedestrian", "Pedestrian AP", 2), ("AP_bicycle", "Cyclist AP", 2),
+               ("gflops", "GFLOPs", 2), ("params", "Params (M)", 3), ("latency_ms", "Latency (ms)", 1))
 
 
-def rows(records: list[dict]) -> list[dict]:
+def columns_for(records: list[dict]) -> tuple:
+    """The VoD columns when the trials were scored with the VoD protocol, else DSFEC's."""
+    vod = any("mAP_corridor" in r.get("metrics", {}) for r in records)
+    return VOD_COLUMNS if vod else COLUMNS
+
+
+def headline(records: list[dict]) -> tuple[str, str]:
+    """(record key, title) of the figure candidates are ranked and plotted by."""
+    key, title, _ = columns_for(records)[0]
+    return key, title
+
+
+def rows(records: list[dict], columns: tuple | None = None) -> list[dict]:
     """One row per candidate (label), seeds aggregated to mean and spread; failed trials listed."""
+    columns = columns or columns_for(records)
     groups = defaultdict(list)
     for r in records:
         groups[r["label"]].append(r)
@@ -34,7 +52,7 @@ def rows(records: list[dict]) -> list[dict]:
         ok = [r for r in recs if r["status"] == "ok"]
         row = {"label": label, "seeds": len(recs), "failed": len(recs) - len(ok),
                "errors": [r["error"] for r in recs if r["status"] != "ok"]}
-        for key, _, _ in COLUMNS:
+        for key, _, _ in columns:
             vals = [_value(r, key) for r in ok]
             vals = [v for v in vals if v is not None]
             row[key] = statistics.fmean(vals) if vals else None
@@ -60,13 +78,13 @@ def _cell(row, base, key, digits) -> str:
     return text
 
 
-def markdown(table: list[dict], base_label: str | None, title: str) -> str:
+def markdown(table: list[dict], base_label: str | None, title: str, columns: tuple = COLUMNS) -> str:
     base = next((r for r in table if r["label"] == base_label), None)
-    head = ["candidate"] + [name for _, name, _ in COLUMNS]
+    head = ["candidate"] + [name for _, name, _ in columns]
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in table:
         mark = " (base)" if r is base else ""
-        lines.append("| " + " | ".join([r["label"] + mark] + [_cell(r, base, k, d) for k, _, d in COLUMNS]) + " |")
+        lines.append("| " + " | ".join([r["label"] + mark] + [_cell(r, base, k, d) for k, _, d in columns]) + " |")
     for r in table:
         for err in r["errors"]:
             lines.append(f"\nFailed: {r['label']}: {err}")
@@ -92,9 +110,9 @@ def provenance(records: list[dict], meta: dict) -> str:
     return "\n" + line + "\n" + (f"\nCommand: `{meta['command']}`\n" if meta.get("command") else "")
 
 
-def csv_text(table: list[dict]) -> str:
+def csv_text(table: list[dict], columns: tuple = COLUMNS) -> str:
     buf = io.StringIO()
-    keys = ["label", "seeds", "failed"] + [k for key, _, _ in COLUMNS for k in (key, key + "_sd")]
+    keys = ["label", "seeds", "failed"] + [k for key, _, _ in columns for k in (key, key + "_sd")]
     writer = csv.DictWriter(buf, keys, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(table)
@@ -107,12 +125,13 @@ def pareto(points: list[tuple[float, float]]) -> list[int]:
             if not any((c2 <= c and s2 >= s) and (c2 < c or s2 > s) for c2, s2 in points)]
 
 
-def plot(table: list[dict], cost: str, path: Path, title: str) -> None:
+def plot(table: list[dict], cost: str, path: Path, title: str, score: tuple[str, str] = ("car_mAP", "Car mAP")) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    pts = [(r[cost], r["car_mAP"], r["label"]) for r in table if r[cost] is not None and r["car_mAP"] is not None]
+    key, name = score
+    pts = [(r[cost], r[key], r["label"]) for r in table if r[cost] is not None and r[key] is not None]
     fig, ax = plt.subplots(figsize=(6, 4.2), dpi=120)
     if pts:
         front = set(pareto([(c, s) for c, s, _ in pts]))
@@ -123,7 +142,7 @@ def plot(table: list[dict], cost: str, path: Path, title: str) -> None:
         ax.plot([c for c, _ in fr], [s for _, s in fr], color="tab:red", lw=1, label="Pareto front")
         ax.legend(fontsize=8)
     ax.set_xlabel({"gflops": "GFLOPs (2 x MAC, batch 1)", "latency_ms": "latency (ms, batch 1, CPU)"}[cost])
-    ax.set_ylabel("Car mAP (%)")
+    ax.set_ylabel(f"{name} (%)")
     ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -141,13 +160,15 @@ def write_reports(run_dir: str | Path) -> dict:
         raise ValueError(f"{run_dir}: no journal records to report")
     meta_path = run_dir / "search.json"
     meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
-    table = rows(records)
+    columns = columns_for(records)
+    table = rows(records, columns)
     title = meta.get("title", "ablation")
-    atomic.write_text(run_dir / "report.md", markdown(table, meta.get("base_label"), title) + provenance(records, meta))
-    atomic.write_text(run_dir / "report.csv", csv_text(table))
+    atomic.write_text(run_dir / "report.md",
+                      markdown(table, meta.get("base_label"), title, columns) + provenance(records, meta))
+    atomic.write_text(run_dir / "report.csv", csv_text(table, columns))
     atomic.write_json(run_dir / "records.json", records)
-    plot(table, "gflops", run_dir / "map_vs_gflops.png", title)
-    plot(table, "latency_ms", run_dir / "map_vs_latency.png", title)
+    plot(table, "gflops", run_dir / "map_vs_gflops.png", title, headline(records))
+    plot(table, "latency_ms", run_dir / "map_vs_latency.png", title, headline(records))
     return {"rows": table, "files": ["report.md", "report.csv", "records.json", "map_vs_gflops.png",
                                      "map_vs_latency.png"]}
 

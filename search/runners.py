@@ -8,7 +8,14 @@ from pathlib import Path
 from typing import Callable
 
 from .journal import Journal
+from .report import headline
 from .trial import run_trial
+
+
+def summary(record: dict) -> str:
+    """'<headline> 12.34, GFLOPs 5.67' of an ok record, for the progress log."""
+    key, title = headline([record])
+    return f"{title} {record['metrics'][key]:.2f}, GFLOPs {record['costs']['gflops']:.2f}"
 
 
 def pending(trials: list[dict], journal: Journal, retry_failed: bool = False) -> list[dict]:
@@ -25,9 +32,7 @@ def run_local(trials: list[dict], run_dir: str | Path, retry_failed: bool = Fals
         log(f"[{i}/{len(todo)}] {trial['label']} (seed {trial['seed']})")
         record = run_trial(trial, run_dir)
         journal.append(record)
-        log(f"    {record['status']}: " + (f"car mAP {record['metrics']['car_mAP']:.2f}, GFLOPs "
-                                             f"{record['costs']['gflops']:.2f}" if record["status"] == "ok"
-                                             else record["error"]))
+        log(f"    {record['status']}: " + (summary(record) if record["status"] == "ok" else record["error"]))
     return journal.records()
 
 

@@ -5,6 +5,8 @@ Axes are `FIELD=V1,V2,...` for scalar fields and `FIELD=A|B|...` for tuple field
 comma-separated tuple, e.g. `stage_blocks=3,1,6,3|3,6,6,3`). Derived axes:
   stage{K}_blocks=V1,V2   blocks of stage K (1-4), the rest of stage_blocks kept from the base
   stem_filters=V1,V2      also sets the FEC's last width to V, as in the paper (FEC 32-128-12 -> stem 12)
+  neck=fpn,pan,mdfen      (RadarNeXt) keeps the DCNv3 positions for mdfen ((4,) when the base has
+                          none) and drops them for fpn/pan, as the paper's three variants do
 """
 
 from __future__ import annotations
@@ -65,6 +67,9 @@ def apply_axis(base_cfg, overrides: dict, field: str, value) -> dict:
     elif field == "stem_filters" and getattr(base_cfg, "encoder", None) == "fec":
         f1, f2, _ = out.get("fec_filters", base_cfg.fec_filters)
         out["stem_filters"], out["fec_filters"] = value, (f1, f2, value)
+    elif field == "neck" and hasattr(base_cfg, "dcn_positions"):
+        positions = out.get("dcn_positions", base_cfg.dcn_positions) or (4,)
+        out["neck"], out["dcn_positions"] = value, positions if value == "mdfen" else ()
     else:
         out[field] = value
     return out

@@ -1,6 +1,8 @@
 import tempfile
 
 import jax
+import jax.numpy as jnp
+import numpy as np
 import pytest
 
 from dsfec_jax import zoo
@@ -18,6 +20,23 @@ def tiny(name: str, /, **overrides):
     """A registered variant on a 32x32 grid with few pillar slots: same layers, cheap to compile."""
     overrides = {"grid": TINY_GRID, "max_pillars": 96, "max_points": 4, **overrides}
     return zoo.create(name, **overrides)
+
+
+def random_variables(det, seed: int) -> dict:
+    """Random weights and non-trivial BN statistics without compiling `init` (the shapes come
+    from eval_shape), so fusion is tested on more than identity statistics."""
+    rng = np.random.default_rng(seed)
+
+    def fill(path, leaf):
+        name = path[-1].key
+        if name == "var":
+            return jnp.asarray(rng.uniform(0.5, 2.0, leaf.shape), leaf.dtype)
+        if name == "scale":
+            return jnp.asarray(rng.uniform(0.0, 1.0, leaf.shape), leaf.dtype)
+        fan_in = int(np.prod(leaf.shape[:-1])) if len(leaf.shape) > 1 else 4
+        return jnp.asarray(rng.normal(0, fan_in**-0.5, leaf.shape), leaf.dtype)
+
+    return jax.tree_util.tree_map_with_path(fill, jax.eval_shape(det.init, jax.random.key(0)))
 
 
 @pytest.fixture

@@ -9,8 +9,9 @@ from dsfec_jax import zoo
 from dsfec_jax.grid import Grid
 from dsfec_jax.models.center_head import CenterHead
 from dsfec_jax.profile import counting
+from conftest import random_variables
 
-RADARNEXT = zoo.available("radarnext")
+RADARNEXT = [n for n in zoo.available("radarnext") if not n.endswith("_tj4d")]  # TJ4D: same layers
 TINY = dict(grid=Grid((0.0, 5.12), (-2.56, 2.56), (-3.0, 2.0), 0.16), max_pillars=128)  # 32 x 32
 
 
@@ -23,6 +24,21 @@ def deployed_params(name: str, **overrides) -> int:
 
 def test_all_six_variants_are_registered():
     assert sorted(RADARNEXT) == sorted(f"radarnext_{n}{d}" for n in ("fpn", "pan", "mdfen") for d in ("", "_dense"))
+
+
+def test_tj4d_variants_read_tj4d_frames_with_four_classes(shared_data):
+    from dsfec_jax.data.pillarize import PillarSpec, pillarize, select_columns
+    from dsfec_jax.data.sources import load_frames
+
+    frame = load_frames(f"tj4d:{shared_data / 'tj4dradset' / 'Sample'}", "val", 1, features="native")[0]
+    for neck in ("fpn", "pan", "mdfen"):
+        cfg = zoo.config(f"radarnext_{neck}_tj4d")
+        assert cfg.grid.shape == (432, 432) and cfg.classes[-1] == "truck" and cfg.neck == neck
+        tensors, _ = pillarize(select_columns(frame, cfg.point_features), PillarSpec.of(cfg))
+        assert tensors["points"].shape[-1] == 8 and tensors["mask"].any()
+    vod = deployed_params("radarnext_fpn")
+    # 8 columns (+ 6 offsets) in the pillar net's linear layer; one more 3x3 heatmap output channel
+    assert deployed_params("radarnext_fpn_tj4d") - vod == 64 + (3 * 3 * 64 + 1)
 
 
 # Reference-spec §1: the public code's re-parameterized counts (k = 1, no corner head) are
@@ -38,23 +54,6 @@ def test_deployed_parameter_counts_match_the_public_code(name, expected):
 @pytest.mark.parametrize("positions,paper_m", [((1,), 1.694), ((2,), 1.694), ((5,), 1.547), ((1, 2, 4), 1.905)])
 def test_dcn_positions_reproduce_table_iii_counts(positions, paper_m):
     assert round(deployed_params("radarnext_mdfen", dcn_positions=positions) / 1e6, 3) == paper_m
-
-
-def random_variables(det, seed: int) -> dict:
-    """Random weights and non-trivial BN statistics without compiling `init` (the shapes come
-    from eval_shape), so fusion is tested on more than identity statistics."""
-    rng = np.random.default_rng(seed)
-
-    def fill(path, leaf):
-        name = path[-1].key
-        if name == "var":
-            return jnp.asarray(rng.uniform(0.5, 2.0, leaf.shape), leaf.dtype)
-        if name == "scale":
-            return jnp.asarray(rng.uniform(0.0, 1.0, leaf.shape), leaf.dtype)
-        fan_in = int(np.prod(leaf.shape[:-1])) if len(leaf.shape) > 1 else 4
-        return jnp.asarray(rng.normal(0, fan_in**-0.5, leaf.shape), leaf.dtype)
-
-    return jax.tree_util.tree_map_with_path(fill, jax.eval_shape(det.init, jax.random.key(0)))
 
 
 # Every neck x backbone; a shallower (2, 2, 2) backbone keeps the test fast and still has, in

@@ -17,7 +17,7 @@ def n_params(detector):
 
 def test_available_lists_the_paper_variants():
     assert zoo.available("dsfec") == ["baseline", "dsfec_l", "dsfec_m", "dsfec_s"]
-    radarnext = [f"radarnext_{n}{d}" for n in ("fpn", "mdfen", "pan") for d in ("", "_dense")]
+    radarnext = [f"radarnext_{n}{d}" for n in ("fpn", "mdfen", "pan") for d in ("", "_dense", "_tj4d")]
     assert zoo.available("radarnext") == radarnext
     assert zoo.available() == sorted(zoo.available("dsfec") + radarnext)
 

@@ -13,6 +13,14 @@ import jax
 import jax.numpy as jnp
 
 
+def safe_arctan2(sin, cos):
+    """atan2 whose gradient is finite at sin = cos = 0 (0 there). The losses decode every target
+    slot, padding included, and a cell of an empty map can give exactly (0, 0): plain atan2's
+    0/0 gradient there, times a zero mask, is still NaN and poisons the whole update."""
+    degenerate = (sin == 0) & (cos == 0)
+    return jnp.where(degenerate, 0.0, jnp.arctan2(sin, jnp.where(degenerate, 1.0, cos)))
+
+
 def decode_codes(code_BxKx8, cell_BxK, width: int, step: float, origin_Bx2):
     """(x, y, z, w, l, h, yaw) of box codes (offset, z, log sizes, sin, cos) at flat cells
     i * width + j of a map whose cells are `step` metres, per-sample origin (x_min, y_min)."""
@@ -21,7 +29,7 @@ def decode_codes(code_BxKx8, cell_BxK, width: int, step: float, origin_Bx2):
     x = (i + code_BxKx8[..., 0]) * step + origin[:, 0:1]
     y = (j + code_BxKx8[..., 1]) * step + origin[:, 1:2]
     size = jnp.exp(jnp.clip(code_BxKx8[..., 3:6], -5.0, 5.0))  # bounded: a wild early step cannot overflow
-    yaw = jnp.arctan2(code_BxKx8[..., 6], code_BxKx8[..., 7])
+    yaw = safe_arctan2(code_BxKx8[..., 6], code_BxKx8[..., 7])
     return jnp.concatenate([x[..., None], y[..., None], code_BxKx8[..., 2:3], size, yaw[..., None]], -1)
 
 

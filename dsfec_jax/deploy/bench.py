@@ -49,12 +49,10 @@ def model_setup(name: str):
 
 
 def jax_stages(det, variables, predictor) -> dict:
-    from ..boxes.decode import decode_heads
-    from ..boxes.pixor import cell_centres
+    from ..predict import decoder
 
-    cells = cell_centres(det.config.grid, det.config.output_stride)
     net = jax.jit(det.apply)
-    dec = jax.jit(lambda maps: decode_heads(maps, predictor.head_classes, cells, 100))
+    dec = jax.jit(decoder(det.config, 100))
     return {"network": lambda batch: jax.block_until_ready(net(variables, batch)),
             "decode": lambda maps: jax.device_get(dec(maps))}
 
@@ -145,11 +143,9 @@ def time_chains(chains: dict, repeats: int, warmup: int) -> dict:
 
 def jax_throughput(det, variables, predictor, repeats: int) -> dict:
     """Frames/s of network + decode at each batch size (batch 1 .. 8) -> {batch: fps}."""
-    from ..boxes.decode import decode_heads
-    from ..boxes.pixor import cell_centres
+    from ..predict import decoded_network
 
-    cells = cell_centres(det.config.grid, det.config.output_stride)
-    fn = jax.jit(lambda v, x: decode_heads(det.apply(v, x), predictor.head_classes, cells, 100))
+    fn = jax.jit(decoded_network(det, 100))
     out = {}
     for b in JAX_BATCHES:
         x = det.dummy_inputs(b, occupancy=0.25)

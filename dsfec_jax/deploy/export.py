@@ -2,10 +2,13 @@
 serialized) and `deploy.json` (what a runtime needs around the graph, and how it was made).
 
 The graph is pillar tensors -> pillar feature net -> scatter -> backbone -> neck -> heads ->
-decode (sigmoid, PIXOR box decode, top-k per head): boxes (B, K, 5) as x, y, w, l, yaw;
+decode (sigmoid, box decode, top-k): DSFEC gives boxes (B, K, 5) as x, y, w, l, yaw, a
+CenterHead (RadarNeXt) boxes (B, K, 7) as x, y, z, w, l, h, yaw with IoU-rescored scores;
 scores (B, K); labels (B, K). Pillarization and rotated NMS stay on the host, as in the
 field's deploy tools. The depthwise kernel is exported as a grouped convolution (ONNX
 `Conv(group=C)`); the shifted form jitted JAX prefers turns into ~1000 slow ONNX nodes.
+A re-parameterizable model (RadarNeXt) is exported in its fused form (`zoo.deploy`); its DCNv3
+bilinear sampling becomes ONNX gathers.
 """
 
 from __future__ import annotations
@@ -14,12 +17,10 @@ import dataclasses
 from pathlib import Path
 
 import jax
-import numpy as np
 
 from .. import atomic
-from ..boxes.decode import decode_heads
-from ..boxes.pixor import cell_centres
 from ..models.dsfec import HEAD_NAMES
+from ..predict import decoder, head_classes
 from ..profile.environment import versions
 
 INPUTS = ("points", "mask", "coords")
@@ -28,14 +29,12 @@ MAP_OUTPUTS = tuple(f"{h}_{k}" for h in HEAD_NAMES for k in ("cls", "box"))
 
 
 def end_to_end(detector, variables, top_k: int = 100, with_maps: bool = False):
-    """fn(points, mask, coords) -> (boxes, scores, labels[, head maps...]), weights baked in."""
-    cfg = detector.config
-    cells = np.asarray(cell_centres(cfg.grid, cfg.output_stride), np.float32)
-    heads = dict(zip(HEAD_NAMES, cfg.head_classes))
+    """fn(points, mask, coords) -> (boxes, scores, labels[, DSFEC head maps...]), weights baked in."""
+    decode = decoder(detector.config, top_k)
 
     def fn(points, mask, coords):
         maps = detector.apply(variables, {"points": points, "mask": mask, "coords": coords})
-        out = decode_heads(maps, heads, cells, top_k)
+        out = decode(maps)
         return out + tuple(maps[h][k] for h in HEAD_NAMES for k in ("cls", "box")) if with_maps else out
 
     return fn
@@ -60,7 +59,12 @@ def onnx_model(fn, specs: list, input_names: list[str], output_names: list[str],
 def export(detector, variables, out_dir: str | Path, top_k: int = 100, batch_size: int = 1,
            with_maps: bool = False, source: dict | None = None) -> dict:
     """Write model.onnx, model.jax_export and deploy.json to out_dir -> {name: path}."""
+    from .. import zoo
+
     out_dir = Path(out_dir)
+    if with_maps and detector.config.family != "dsfec":
+        raise ValueError(f"{detector.name}: with_maps exports DSFEC's head maps; a {detector.config.family} model has none")
+    detector, variables = zoo.deploy(detector, variables)  # fused form (unchanged for DSFEC)
     det = grouped(detector)
     fn = end_to_end(det, variables, top_k, with_maps)
     specs = [jax.ShapeDtypeStruct(v.shape, v.dtype) for v in (det.dummy_inputs(batch_size)[k] for k in INPUTS)]
@@ -75,7 +79,7 @@ def export(detector, variables, out_dir: str | Path, top_k: int = 100, batch_siz
         "input_shapes": {k: list(s.shape) for k, s in zip(INPUTS, specs)},
         "pillars": {"grid": dataclasses.asdict(cfg.grid), "features": list(cfg.point_features),
                     "max_pillars": cfg.max_pillars, "max_points": cfg.max_points},
-        "head_classes": {h: list(c) for h, c in zip(HEAD_NAMES, cfg.head_classes)},
+        "head_classes": {h: list(c) for h, c in head_classes(cfg).items()},
         "onnx": {"opset": model.opset_import[0].version, "nodes": len(model.graph.node)},
         "source": source or {}, "versions": versions()})
     return {"onnx": out_dir / "model.onnx", "jax_export": out_dir / "model.jax_export",

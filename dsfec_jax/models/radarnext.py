@@ -13,7 +13,7 @@ import dataclasses
 
 import flax.linen as nn
 
-from ..grid import VOD_GRID, Grid
+from ..grid import TJ4D_GRID, VOD_GRID, Grid
 from ..layers import ConvBNAct, PillarFeatureNet, RepDWSeparable, reparameterize_tree, scatter_to_bev
 from .center_head import CenterHead
 from .pillar_inputs import random_pillar_inputs
@@ -23,6 +23,9 @@ VOD_FEATURES = ("x", "y", "z", "rcs", "v_r", "v_r_comp", "time")
 # The public config's heatmap order (Pedestrian, Cyclist, Car) in the project's canonical class
 # names: VoD's "Cyclist" (a bicycle with its rider) is "bicycle" here, as in data.sources.CLASS_MAP.
 VOD_CLASSES = ("pedestrian", "bicycle", "car")
+# TJ4DRadSet: its own 8 columns, a 69.12 m x 69.12 m grid (432 x 432) and Truck as a fourth class
+TJ4D_FEATURES = ("x", "y", "z", "v_r", "range", "power", "alpha", "beta")
+TJ4D_CLASSES = ("pedestrian", "bicycle", "car", "truck")
 NECKS = ("fpn", "pan", "mdfen")
 BACKBONES = ("rep_dwc", "dense")
 
@@ -68,6 +71,12 @@ class RadarNeXtConfig:
 
     def dummy_inputs(self, batch_size: int = 1, seed: int = 0, occupancy: float = 0.5) -> dict:
         return random_pillar_inputs(self, batch_size, seed, occupancy)
+
+
+def for_tj4d(cfg: RadarNeXtConfig, name: str) -> RadarNeXtConfig:
+    """The same network configured for TJ4DRadSet (grid, point columns, classes)."""
+    return dataclasses.replace(cfg, name=name, grid=TJ4D_GRID, point_features=TJ4D_FEATURES, classes=TJ4D_CLASSES,
+                               notes="TJ4DRadSet grid 432x432, 0.16 m; 8 TJ4D columns; 4 classes (+ truck)")
 
 
 def validate(cfg: RadarNeXtConfig) -> None:

@@ -12,7 +12,7 @@ any shared per-block cost), so M and S also narrow the stages, extend the neck t
 from __future__ import annotations
 
 from .dsfec import DSFECConfig
-from .radarnext import RadarNeXtConfig
+from .radarnext import RadarNeXtConfig, for_tj4d
 
 PIXOR_NOTE = "PIXOR widths; neck (192,128,64) to 80x80 (an assumption: the paper gives no neck)"
 
@@ -48,3 +48,6 @@ for _neck, _dcn in (("fpn", ()), ("pan", ()), ("mdfen", (4,))):
     RADARNEXT_VARIANTS[f"radarnext_{_neck}_dense"] = RadarNeXtConfig(
         name=f"radarnext_{_neck}_dense", neck=_neck, dcn_positions=_dcn, backbone="dense",
         notes="Dense = the PointPillars SECOND backbone (3x3 convs, 1 + (3,5,5) per stage). " + RADARNEXT_NOTE)
+for _neck in ("fpn", "pan", "mdfen"):  # Table I's TJ4D column: the Rep-DWC variants on TJ4DRadSet
+    RADARNEXT_VARIANTS[f"radarnext_{_neck}_tj4d"] = for_tj4d(RADARNEXT_VARIANTS[f"radarnext_{_neck}"],
+                                                            f"radarnext_{_neck}_tj4d")

@@ -1,0 +1,77 @@
+"""The search tooling on the RadarNeXt family: the paper's Table II/III axes, a real sweep scored
+with the VoD protocol and sized in the fused form, and the refusals that come before training."""
+
+import dataclasses
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from dsfec_jax import zoo
+from dsfec_jax.grid import Grid
+from dsfec_jax.profile import counting
+from dsfec_jax.profile.paper_radarnext import TABLE2, TABLE3
+from dsfec_jax.train.schedules import get_schedule
+from experiments import radarnext_table2, radarnext_table3
+from search import grid, recipes, trial
+from search.journal import Journal
+from search.space import candidates, parse_axis
+
+GRID = Grid((0.0, 5.12), (-2.56, 2.56), (-3.0, 2.0), 0.16)  # 32 x 32 cells
+
+
+def test_table_axes_expand_to_the_papers_rows():
+    table2 = candidates("radarnext_mdfen", [parse_axis("neck=fpn,pan,mdfen", "radarnext_mdfen"),
+                                            parse_axis("backbone=dense,rep_dwc", "radarnext_mdfen")])
+    assert sorted(radarnext_table2.paper_key(c["label"]) for c in table2) == sorted(TABLE2)
+    for c in table2:  # each candidate is exactly the registered variant of that name
+        variant = zoo.config(radarnext_table2.paper_key(c["label"]))
+        ours = zoo.config("radarnext_mdfen", **c["overrides"])
+        assert ours == dataclasses.replace(variant, name=ours.name, notes=ours.notes)
+    table3 = candidates("radarnext_mdfen", [parse_axis(f"dcn_positions={radarnext_table3.POSITIONS}", "radarnext_mdfen")])
+    assert [radarnext_table3.positions(c["label"]) for c in table3] == list(TABLE3)
+
+
+@pytest.fixture
+def tiny_radarnext(monkeypatch):
+    """A narrow FPN RadarNeXt on a 32 x 32 grid and a 2-step recipe: a real sweep in seconds."""
+    cfg = zoo.config("radarnext_fpn", name="tiny_rnx", grid=GRID, max_pillars=128, layer_nums=(1, 1, 1),
+                     channels=(16, 32, 64), fpn_channels=16, head_width=16)
+    monkeypatch.setitem(zoo.REGISTRY, "tiny_rnx", cfg)
+    recipe = recipes.Recipe("quick", get_schedule("radarnext", steps=2, batch_size=2, warmup_steps=1), 4, 2,
+                            None, 128, None, 1, supernet_steps=None, light_profile=True, data="synthetic4d")
+    monkeypatch.setitem(recipes.RADARNEXT_RECIPES, "quick", recipe)
+    return "tiny_rnx"
+
+
+def test_sweep_scores_vod_ap_and_sizes_the_fused_form(tiny_radarnext, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert grid.main(["--base", tiny_radarnext, "--axis", "backbone=rep_dwc", "--out", str(out),
+                      "--base-label", "backbone=rep_dwc"]) == 0  # one trial: each costs ~4 compiles
+    records = Journal(out).records()
+    assert [r["status"] for r in records] == ["ok"], [r.get("error") for r in records]
+    for r in records:
+        assert r["data"] == "synthetic4d"
+        assert {"mAP", "mAP_corridor", "AP_car", "AP_pedestrian", "AP_bicycle"} <= set(r["metrics"])
+        det = zoo.create(tiny_radarnext, **r["overrides"])
+        shapes = jax.eval_shape(det.init, jax.random.key(0))
+        variables = jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), shapes)
+        fused = counting.count_params(zoo.deploy(det, variables)[1])["total"]
+        assert r["costs"]["params"] == fused
+        assert fused < counting.count_params(variables)["total"]  # fusion removed BN-identity/scale branches
+    report = (out / "report.md").read_text()
+    assert "mAP (VoD 3D)" in report and "Cyclist AP" in report and "Car mAP" not in report
+    assert "backbone=rep_dwc (base)" in report
+    assert json.loads((out / "search.json").read_text())["data"] == "synthetic4d"
+    assert "mAP (VoD 3D)" in capsys.readouterr().out
+
+
+def test_oneshot_and_unknown_fields_are_refused_before_training(tmp_path, monkeypatch):
+    monkeypatch.setattr(trial, "measure", lambda *a: pytest.fail("trained a refused search"))
+    with pytest.raises(SystemExit, match="oneshot.*radarnext"):
+        grid.main(["--base", "radarnext_fpn", "--axis", "layer_nums=3,5,5|1,5,5", "--strategy", "oneshot",
+                   "--out", str(tmp_path / "a")])
+    with pytest.raises(SystemExit, match="dcn_positions"):  # DCNv3 on a PAN neck
+        grid.main(["--base", "radarnext_pan", "--axis", "dcn_positions=4", "--out", str(tmp_path / "b")])
+    assert not (tmp_path / "a" / "journal.jsonl").exists() and not (tmp_path / "b" / "journal.jsonl").exists()
