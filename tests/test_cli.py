@@ -56,6 +56,28 @@ def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
     assert len(detections.boxes) == len(detections.scores)
 
 
+def test_ship_measures_a_radarnext_run_with_the_vod_protocol(monkeypatch, tmp_path, capsys):
+    """A RadarNeXt run ships with the VoD 3D AP on the synthetic 4D benchmark (not the nuScenes
+    metric) and with the pillar slots the run trained with."""
+    from conftest import random_variables
+    from dsfec_jax import checkpoint
+    from dsfec_jax.grid import Grid
+
+    grid = Grid((0.0, 10.24), (-5.12, 5.12), (-3.0, 2.0), 0.16)
+    det = zoo.create("radarnext_fpn", grid=grid, layer_nums=(1, 1, 1), max_points=4, max_pillars=96)
+    monkeypatch.setitem(zoo.REGISTRY, "tiny_radarnext", det.config)
+    run = tmp_path / "run"
+    checkpoint.save(run / "checkpoints" / "step_0000001.msgpack", random_variables(det, 0), {"step": 1})
+    (run / "run.json").write_text(json.dumps({"seed": 0, "overrides": {"max_pillars": 96}}))
+    assert cli.main(["ship", "--model", "tiny_radarnext", "--run-dir", str(run), "--checkpoint", "last",
+                     "--frames", "2", "--out-dir", str(tmp_path / "weights")]) == 0
+    capsys.readouterr()
+    measured = json.loads((tmp_path / "weights" / "tiny_radarnext.msgpack.json").read_text())["measured"]
+    for split in ("val", "test"):
+        assert measured[split]["protocol"] == "vod" and measured[split]["data"] == "synthetic4d"
+        assert set(measured[split]["AP"]) == {"car", "pedestrian", "bicycle"} and "car_mAP" not in measured[split]
+
+
 def test_load_without_shipped_weights_says_how_to_get_them(tiny_model):
     with pytest.raises(FileNotFoundError, match="dsfec train --model tiny_s"):
         zoo.load(tiny_model)
