@@ -75,3 +75,25 @@ def test_oneshot_and_unknown_fields_are_refused_before_training(tmp_path, monkey
     with pytest.raises(SystemExit, match="dcn_positions"):  # DCNv3 on a PAN neck
         grid.main(["--base", "radarnext_pan", "--axis", "dcn_positions=4", "--out", str(tmp_path / "b")])
     assert not (tmp_path / "a" / "journal.jsonl").exists() and not (tmp_path / "b" / "journal.jsonl").exists()
+
+
+def test_accuracy_record_keeps_each_runs_command_evaluations_and_test(tmp_path, capsys):
+    from experiments import radarnext_accuracy
+
+    run = tmp_path / "radarnext_fpn"
+    run.mkdir()
+    (run / "run.json").write_text(json.dumps({"model": "radarnext_fpn", "command": "dsfec train --model radarnext_fpn",
+                                              "seed": 0, "steps": 10, "train_frames": 8, "val_frames": 2,
+                                              "versions": {"jax": "x"}, "data": {"source": "synthetic4d"}}))
+    evals = [{"step": 5, "eval": {"mAP": 1.0, "mAP_corridor": 2.0, "AP": {"car": 1.0}}},
+             {"step": 10, "eval": {"mAP": 3.0, "mAP_corridor": 4.0, "AP": {"car": 3.0}}}]
+    (run / "metrics.jsonl").write_text("\n".join(json.dumps(e) for e in [{"step": 1, "loss": 9.0}, *evals]))
+    (run / "test.json").write_text(json.dumps({"mAP": 5.0, "mAP_corridor": 6.0, "AP": {"car": 5.0}, "frames": 7}))
+    out = tmp_path / "record.json"
+    assert radarnext_accuracy.main([str(run), "--out", str(out)]) == 0
+    assert "| radarnext_fpn | 10 | 3.00 (4.00) | 5.00 (6.00), 7 frames | car 5.00 |" in capsys.readouterr().out
+    record = json.loads(out.read_text())["runs"][0]
+    assert [e["step"] for e in record["val"]] == [5, 10] and record["command"].startswith("dsfec train")
+    (run / "metrics.jsonl").write_text(json.dumps({"step": 3, "eval": {"car_mAP": 1.0}}))
+    with pytest.raises(SystemExit, match="line 1: evaluation without 'mAP'"):
+        radarnext_accuracy.read_run(run)
