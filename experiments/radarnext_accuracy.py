@@ -31,7 +31,10 @@ def read_run(run_dir: Path) -> dict:
                 raise SystemExit(f"{run_dir}/metrics.jsonl line {n}: evaluation without 'mAP' (not a VoD-metric run)")
             evals.append({"step": row["step"], **row["eval"]})
     test_path = run_dir / "test.json"
-    test = json.loads(test_path.read_text()) if test_path.is_file() else None
+    try:
+        test = json.loads(test_path.read_text()) if test_path.is_file() else None
+    except json.JSONDecodeError as err:
+        raise SystemExit(f"{test_path}: not JSON ({err}); expected the output of `dsfec eval --json`") from err
     return {"run_dir": str(run_dir), "model": info["model"], "command": info.get("command"), "seed": info["seed"],
             "steps": info["steps"], "data": info.get("data"), "train_frames": info["train_frames"],
             "val_frames": info["val_frames"], "versions": info["versions"], "val": evals, "test": test}

@@ -94,6 +94,9 @@ def test_accuracy_record_keeps_each_runs_command_evaluations_and_test(tmp_path, 
     assert "| radarnext_fpn | 10 | 3.00 (4.00) | 5.00 (6.00), 7 frames | car 5.00 |" in capsys.readouterr().out
     record = json.loads(out.read_text())["runs"][0]
     assert [e["step"] for e in record["val"]] == [5, 10] and record["command"].startswith("dsfec train")
+    (run / "test.json").write_text("")  # an eval interrupted before it printed
+    with pytest.raises(SystemExit, match="test.json: not JSON"):
+        radarnext_accuracy.read_run(run)
     (run / "metrics.jsonl").write_text(json.dumps({"step": 3, "eval": {"car_mAP": 1.0}}))
     with pytest.raises(SystemExit, match="line 1: evaluation without 'mAP'"):
         radarnext_accuracy.read_run(run)
