@@ -104,20 +104,14 @@ class Predictor(HostPipeline):
         return jax.device_get(self.network(self.variables, batch))
 
 
-class CenterPredictor(HostPipeline):
-    """The same pipeline for CenterHead detectors (RadarNeXt): 3D boxes come out of the network
-    (centre z and height included); rotated NMS per class on their BEV footprints (IoU 0.2, at
-    most 83 boxes per frame after NMS, as the public config)."""
+class CenterPredictor(Predictor):
+    """The same pipeline for CenterHead detectors (RadarNeXt), with the public config's defaults:
+    3D boxes come out of the network (centre z and height included); rotated NMS per class on
+    their BEV footprints (IoU 0.2), 500 decoded candidates, at most 83 boxes per frame after NMS."""
 
     def __init__(self, detector, variables, score_threshold: float = 0.1, top_k: int = 500,
                  nms_iou: float = 0.2, max_boxes: int = 83):
-        cfg = detector.config
-        self.detector, self.variables = detector, variables
-        self._setup(PillarSpec.of(cfg), head_classes(cfg), score_threshold, nms_iou, max_boxes)
-        self.network = jax.jit(decoded_network(detector, top_k))
-
-    def run(self, batch: dict):
-        return jax.device_get(self.network(self.variables, batch))
+        super().__init__(detector, variables, score_threshold, top_k, nms_iou, max_boxes)
 
 
 def predictor_for(detector, variables, **options) -> HostPipeline:
