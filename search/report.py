@@ -167,8 +167,9 @@ def write_reports(run_dir: str | Path) -> dict:
                       markdown(table, meta.get("base_label"), title, columns) + provenance(records, meta))
     atomic.write_text(run_dir / "report.csv", csv_text(table, columns))
     atomic.write_json(run_dir / "records.json", records)
-    plot(table, "gflops", run_dir / "map_vs_gflops.png", title, headline(records))
-    plot(table, "latency_ms", run_dir / "map_vs_latency.png", title, headline(records))
+    score = headline(records)
+    plot(table, "gflops", run_dir / "map_vs_gflops.png", title, score)
+    plot(table, "latency_ms", run_dir / "map_vs_latency.png", title, score)
     return {"rows": table, "files": ["report.md", "report.csv", "records.json", "map_vs_gflops.png",
                                      "map_vs_latency.png"]}
 

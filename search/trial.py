@@ -52,7 +52,7 @@ def run_trial(trial: dict, run_dir: str | Path) -> dict:
 
 
 def flat_metrics(scores: dict) -> dict:
-    """Per-class APs of the VoD protocol as top-level keys (AP_Car, AP_corridor_Car, ...), so a
+    """Per-class APs of the VoD protocol as top-level keys (AP_car, AP_corridor_car, ...), so a
     report column reads them like the headline figures; DSFEC's scores pass through."""
     out = dict(scores)
     for group in ("AP", "AP_corridor"):
