@@ -7,7 +7,7 @@ from typing import Sequence
 import numpy as np
 
 from .data.frame import Frame
-from .metrics import kitti3d, nuscenes
+from .metrics import kitti3d, nuscenes, resampling
 from .predict import Detections, Predictor
 
 
@@ -28,15 +28,19 @@ def in_grid(boxes, grid):
 
 
 def score(frames: Sequence[Frame], detections: dict[str, Detections], classes=nuscenes.DSFEC_CLASSES,
-          grid=None) -> dict:
+          grid=None, match_classes: Sequence[str] = ()) -> dict:
     """nuScenes AP per class and threshold, class mAPs, AP@4. Ground-truth boxes are all kept
     (radar-only frames have no lidar count for the devkit's num_pts == 0 filter) except, with
     `grid`, those centred off the detector's grid (DSFEC sees X 0..80 m only, not 360 degrees);
-    the devkit's class ranges (car 50 m, pedestrian 40 m, ...) apply, measured from the sensor."""
+    the devkit's class ranges (car 50 m, pedestrian 40 m, ...) apply, measured from the sensor.
+    `match_classes` adds "match_tables": {class: resampling.MatchTable} for bootstrap intervals."""
     frames = [frames[i] for i in range(len(frames))]
     gt = {f.frame_id: (in_grid(f.boxes, grid) if grid is not None else f.boxes) for f in frames}
     pred = {token: (d.boxes, d.scores) for token, d in detections.items()}
-    return nuscenes.evaluate(gt, pred, classes=classes, drop_empty_gt=False)
+    out = nuscenes.evaluate(gt, pred, classes=classes, drop_empty_gt=False)
+    if match_classes:
+        out["match_tables"] = {c: resampling.match_table(gt, pred, c, drop_empty_gt=False) for c in match_classes}
+    return out
 
 
 def headline(metrics: dict) -> dict:
@@ -47,8 +51,9 @@ def headline(metrics: dict) -> dict:
             "mAP": 100 * metrics["mAP"]}
 
 
-def evaluate(predictor: Predictor, frames: Sequence[Frame], classes=nuscenes.DSFEC_CLASSES) -> dict:
-    metrics = score(frames, predict_frames(predictor, frames), classes, predictor.spec.grid)
+def evaluate(predictor: Predictor, frames: Sequence[Frame], classes=nuscenes.DSFEC_CLASSES,
+             match_classes: Sequence[str] = ()) -> dict:
+    metrics = score(frames, predict_frames(predictor, frames), classes, predictor.spec.grid, match_classes)
     return {**headline(metrics), "metrics": metrics}
 
 

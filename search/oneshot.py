@@ -37,6 +37,7 @@ from dsfec_jax.train.losses import LossConfig, detection_loss
 from dsfec_jax.train.schedules import optimizer
 from dsfec_jax.train.step import init_state
 
+from . import significance
 from .inherit import initial_variables
 from .journal import Journal
 from .recipes import get_recipe
@@ -166,12 +167,13 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
         t1, c1 = time.perf_counter(), time.process_time()
         stats = recalibrate({"params": state["params"], "batch_stats": state["batch_stats"]}, calib, depth)
         predictor.variables, predictor.depth = {"params": state["params"], "batch_stats": stats}, depth
-        result = evaluate(predictor, val)
+        result = evaluate(predictor, val, match_classes=(significance.CLASS,))
         costs = profile([zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats,
                         warmup=1, light=recipe.light_profile)[0]
         metrics = {kk: result[kk] for kk in ("car_mAP", "car_AP4", "mAP")}
         metrics.update(class_mAP=result["metrics"]["class_mAP"], **{"AP@4": result["metrics"]["AP@4"]})
         journal.append({**trial, "status": "ok", "metrics": metrics,
+                        "matches": significance.matches_entry(result["metrics"]),
                         "costs": {c: costs[c] for c in ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")},
                         "supernet": {"stage_blocks": list(cfg.stage_blocks), "steps": steps,
                                      "wall_s": round(supernet_s, 1), "cpu_s": round(supernet_cpu, 1)},

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from dsfec_jax import atomic
 
+from . import significance
 from .journal import Journal
 
 # (record key, column title, digits); the first column is the headline the plots and logs use
@@ -78,16 +79,31 @@ def _cell(row, base, key, digits) -> str:
     return text
 
 
-def markdown(table: list[dict], base_label: str | None, title: str, columns: tuple = COLUMNS) -> str:
+def _interval(sig: dict | None, label: str) -> list[str]:
+    """The bootstrap column's cell: the 95 % interval of the Car-mAP difference from the base."""
+    if sig is None or "delta" not in sig:
+        return []
+    d = sig["delta"].get(label)
+    return ["-" if d is None else f"[{d['ci95'][0]:+.2f}, {d['ci95'][1]:+.2f}]"]
+
+
+def markdown(table: list[dict], base_label: str | None, title: str, columns: tuple = COLUMNS,
+             sig: dict | None = None) -> str:
+    """The table; with `sig` (search.significance) a column of bootstrap intervals and its summary."""
     base = next((r for r in table if r["label"] == base_label), None)
     head = ["candidate"] + [name for _, name, _ in columns]
+    if sig is not None and "delta" in sig:
+        head.insert(2, "Δ Car mAP 95 % CI (frames)")
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in table:
         mark = " (base)" if r is base else ""
-        lines.append("| " + " | ".join([r["label"] + mark] + [_cell(r, base, k, d) for k, _, d in columns]) + " |")
+        cells = [_cell(r, base, k, d) for k, _, d in columns]
+        lines.append("| " + " | ".join([r["label"] + mark] + cells[:1] + _interval(sig, r["label"]) + cells[1:]) + " |")
     for r in table:
         for err in r["errors"]:
             lines.append(f"\nFailed: {r['label']}: {err}")
+    if sig is not None:
+        lines.append("\n" + significance.summary(sig))
     return "\n".join(lines) + "\n"
 
 
@@ -163,15 +179,20 @@ def write_reports(run_dir: str | Path) -> dict:
     columns = columns_for(records)
     table = rows(records, columns)
     title = meta.get("title", "ablation")
+    sig = significance.paired_bootstrap(records, meta.get("base_label")) if columns is COLUMNS else None
+    files = ["report.md", "report.csv", "records.json", "map_vs_gflops.png", "map_vs_latency.png"]
     atomic.write_text(run_dir / "report.md",
-                      markdown(table, meta.get("base_label"), title, columns) + provenance(records, meta))
+                      markdown(table, meta.get("base_label"), title, columns, sig) + provenance(records, meta))
     atomic.write_text(run_dir / "report.csv", csv_text(table, columns))
-    atomic.write_json(run_dir / "records.json", records)
+    # the match tables stay in the journal: records.json is for reading
+    atomic.write_json(run_dir / "records.json", [{k: v for k, v in r.items() if k != "matches"} for r in records])
+    if sig is not None:
+        atomic.write_json(run_dir / "significance.json", sig)
+        files.append("significance.json")
     score = headline(records)
     plot(table, "gflops", run_dir / "map_vs_gflops.png", title, score)
     plot(table, "latency_ms", run_dir / "map_vs_latency.png", title, score)
-    return {"rows": table, "files": ["report.md", "report.csv", "records.json", "map_vs_gflops.png",
-                                     "map_vs_latency.png"]}
+    return {"rows": table, "files": files, "significance": sig}
 
 
 def main(argv=None) -> int:

@@ -12,8 +12,11 @@ from dsfec_jax import zoo
 from dsfec_jax.data.sources import load_frames
 from dsfec_jax.profile.environment import environment
 from dsfec_jax.profile.records import profile
-from dsfec_jax.train.fit import fit, jsonable
+from dsfec_jax.evaluate import evaluate
+from dsfec_jax.predict import Predictor
+from dsfec_jax.train.fit import fit, jsonable, state_variables
 
+from . import significance
 from .inherit import describe, initial_variables, source_weights
 from .recipes import get_recipe
 
@@ -67,11 +70,15 @@ def measure(trial: dict, trial_dir: Path) -> dict:
     columns = zoo.input_columns(trial["base"])
     frames = load_frames(trial["data"], "train", recipe.train_frames, seed=0, features=columns)
     val = load_frames(trial["data"], "val", recipe.val_frames, seed=0, features=columns)
-    _, _, scores = fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
-                       window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
-                       init_variables=initial_variables(trial.get("init", "scratch")))
+    det, state, scores = fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
+                             window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
+                             init_variables=initial_variables(trial.get("init", "scratch")))
     # sizes and latency of the inference form (RadarNeXt: MobileOne branches fused), as the paper counts
     deployed = zoo.Detector(zoo.deploy_config(zoo.config(trial["base"], **trial["overrides"])))
     costs = profile([deployed], timing=True, repeats=recipe.latency_repeats, warmup=1, light=recipe.light_profile)[0]
-    return {"metrics": flat_metrics(scores),
-            "costs": {k: costs[k] for k in ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")}}
+    out = {"metrics": flat_metrics(scores),
+           "costs": {k: costs[k] for k in ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")}}
+    if det.config.family == "dsfec":  # the per-frame Car matches of the final state, for the report's intervals
+        result = evaluate(Predictor(det, state_variables(state)), val, match_classes=(significance.CLASS,))
+        out["matches"] = significance.matches_entry(result["metrics"])
+    return out

@@ -71,6 +71,10 @@ def test_real_sweep_trains_measures_and_reports(tiny_search, tmp_path, capsys):
     assert "stage2_blocks=2 (base)" in md and "(-" in md  # the other row shows its change against the base
     assert (out / "map_vs_gflops.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert json.loads((out / "search.json").read_text())["command"].startswith("python -m search.blocks")
+    sig = json.loads((out / "significance.json").read_text())  # the bootstrap re-scores the recorded matches
+    assert sig["frames"] == 2 and set(sig["delta"]) == {"stage2_blocks=1"}
+    for r in records:
+        assert sig["point"][r["label"]] == pytest.approx(r["metrics"]["car_mAP"], abs=1e-3)
 
 
 def fake_measure(calls, fail_label=None):
@@ -164,6 +168,7 @@ def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path
     assert records[0]["costs"]["gflops"] < records[1]["costs"]["gflops"]
     assert all(r["strategy"] == "oneshot" for r in records)
     assert all(r["supernet"]["steps"] == 2 for r in records)  # one round: each subnet trained once
+    assert all("car" in r["matches"] for r in records) and (out / "significance.json").exists()
     # subnets are prefixes of the supernet: their parameter entries are a subset of its entries
     sub = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 1, 1, 1)))
     sup = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 2, 1, 1)))
@@ -230,12 +235,13 @@ def test_oneshot_refuses_non_depth_axes():
 
 
 def test_kendall_tau_and_compare(tmp_path, monkeypatch):
-    from search.compare import compare, kendall_tau
+    from search.compare import compare
+    from search.ranking import kendall_tau
 
     assert kendall_tau([1, 2, 3, 4], [10, 20, 30, 40]) == 1.0
     assert kendall_tau([1, 2, 3, 4], [4, 3, 2, 1]) == -1.0
     assert kendall_tau([1, 2, 3], [1, 3, 2]) == pytest.approx(1 / 3)
-    from search.compare import tau_p_value
+    from search.ranking import tau_p_value
     assert tau_p_value([1, 2, 3, 4, 5, 6], [1, 2, 3, 4, 5, 6]) == pytest.approx(1 / 720)  # one perfect order
     assert tau_p_value([1, 2, 3, 4, 5, 6], [1, 2, 3, 4, 6, 5]) == pytest.approx(6 / 720)  # tau 0.87: 1 + 5 swaps
     assert tau_p_value([1, 2, 3], [3, 2, 1]) == 1.0

@@ -91,7 +91,12 @@ def calc_ap(md: MetricData, min_recall: float = MIN_RECALL, min_precision: float
     dropped; precision below min_precision counts as 0, and the result is rescaled so a perfect curve gives 1."""
     if not (0 <= min_precision < 1 and 0 <= min_recall <= 1):
         raise ValueError(f"need 0 <= min_precision < 1 and 0 <= min_recall <= 1; got {min_precision}, {min_recall}")
-    prec = np.copy(md.precision)[round(100 * min_recall) + 1:] - min_precision
+    return ap_of_precision(md.precision, min_recall, min_precision)
+
+
+def ap_of_precision(precision: np.ndarray, min_recall: float = MIN_RECALL, min_precision: float = MIN_PRECISION) -> float:
+    """`calc_ap` of a precision curve on the 101 recall points."""
+    prec = np.copy(precision)[round(100 * min_recall) + 1:] - min_precision
     prec[prec < 0] = 0
     return float(np.mean(prec)) / (1.0 - min_precision)
 
@@ -153,7 +158,7 @@ def _cummean(x: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------------------
 
 @dataclasses.dataclass(frozen=True)
-class _ClassCandidates:
+class ClassCandidates:
     """One class's predictions in the devkit's order, each with the GT boxes it could match, nearest first.
 
     Distances and per-pair errors do not depend on the threshold, so they are computed once for all of them."""
@@ -180,7 +185,7 @@ def _sample_candidates(boxes: list, gts: list, max_dist: float) -> list:
     return out
 
 
-def _class_candidates(gt: Mapping, pred: Mapping, class_name: str, max_dist: float) -> _ClassCandidates:
+def class_candidates(gt: Mapping, pred: Mapping, class_name: str, max_dist: float) -> ClassCandidates:
     gts = {tok: [b for b in boxes if b["detection_name"] == class_name] for tok, boxes in gt.items()}
     preds, candidates = [], []
     for tok, boxes in pred.items():  # the devkit's order: samples as listed, boxes as listed
@@ -189,14 +194,22 @@ def _class_candidates(gt: Mapping, pred: Mapping, class_name: str, max_dist: flo
         candidates += _sample_candidates(mine, gts.get(tok, []), max_dist) if mine else []
     # The devkit sorts (score, index) pairs and reverses: highest score first, ties to the later prediction.
     order = sorted(range(len(preds)), key=lambda i: (preds[i][1]["detection_score"], i), reverse=True)
-    return _ClassCandidates(sum(len(b) for b in gts.values()), [preds[i] for i in order],
+    return ClassCandidates(sum(len(b) for b in gts.values()), [preds[i] for i in order],
                             [candidates[i] for i in order], gts)
 
 
-def _match(cc: _ClassCandidates, class_name: str, dist_th: float) -> MetricData:
-    """Greedy matching, highest score first: nearest still-unmatched GT, a hit only if strictly below dist_th."""
+def _match(cc: ClassCandidates, class_name: str, dist_th: float) -> MetricData:
     if cc.npos == 0:
         return MetricData.no_predictions()
+    is_tp, matches = greedy_match(cc, class_name, dist_th)
+    if not matches:
+        return MetricData.no_predictions()
+    return _curves(is_tp, np.array([b["detection_score"] for _, b in cc.preds], float), matches, cc.npos)
+
+
+def greedy_match(cc: ClassCandidates, class_name: str, dist_th: float) -> tuple[np.ndarray, list]:
+    """Greedy matching, highest score first: nearest still-unmatched GT, a hit only if strictly below dist_th.
+    -> (1.0 / 0.0 per prediction in cc.preds' order, [(score, TP errors)] of the hits)."""
     taken = {tok: np.zeros(len(b), bool) for tok, b in cc.gts.items()}
     is_tp, matches = np.zeros(len(cc.preds)), []
     for k, ((tok, box), (idx, dist)) in enumerate(zip(cc.preds, cc.candidates)):
@@ -209,9 +222,7 @@ def _match(cc: _ClassCandidates, class_name: str, dist_th: float) -> MetricData:
                     cc.errors[k, j] = _match_errors(cc.gts[tok][j], box, class_name)
                 matches.append((box["detection_score"], cc.errors[k, j]))
                 break
-    if not matches:
-        return MetricData.no_predictions()
-    return _curves(is_tp, np.array([b["detection_score"] for _, b in cc.preds], float), matches, cc.npos)
+    return is_tp, matches
 
 
 def _curves(is_tp: np.ndarray, conf: np.ndarray, matches: list, npos: int) -> MetricData:
@@ -233,7 +244,7 @@ def accumulate(gt: Mapping[str, list], pred: Mapping[str, list], class_name: str
     """The devkit's ``accumulate`` for one class and one centre-distance threshold (metres).
 
     ``gt`` and ``pred`` map sample tokens to lists of box dicts (already filtered; see ``filter_boxes``)."""
-    return _match(_class_candidates(gt, pred, class_name, dist_th), class_name, dist_th)
+    return _match(class_candidates(gt, pred, class_name, dist_th), class_name, dist_th)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -274,6 +285,16 @@ def _check_samples(gt: Mapping, pred: Mapping, max_boxes_per_sample: int | None,
                          f"{len(missing)} missing (e.g. {missing[:3]}), {len(extra)} extra (e.g. {extra[:3]})")
 
 
+def prepare(gt: Mapping, pred: Mapping, class_range: Mapping[str, float] | None = CLASS_RANGE,
+            drop_empty_gt: bool = True, max_boxes_per_sample: int | None = MAX_BOXES_PER_SAMPLE,
+            same_samples: bool = True) -> tuple[dict, dict]:
+    """Both sides in the submission format, checked and filtered as `evaluate` does before matching."""
+    gt = filter_boxes(_as_results(gt, True), class_range, drop_empty_gt)
+    pred = _as_results(pred, False)
+    _check_samples(gt, pred, max_boxes_per_sample, same_samples)
+    return gt, filter_boxes(pred, class_range, drop_empty_gt)
+
+
 def _tp_errors(md: MetricData, class_name: str, min_recall: float) -> dict[str, float]:
     """TP errors at dist_th_tp; the devkit reports NaN where a class has no such property."""
     out = {}
@@ -298,15 +319,12 @@ def evaluate(gt: Mapping, pred: Mapping, classes: Sequence[str] = DSFEC_CLASSES,
     Returns ``{"AP": {cls: {"0.5": ap, ...}}, "class_mAP": {cls: mean over thresholds}, "AP@4": {cls: ap},
     "mAP": mean of class_mAP, "max_recall": {cls: {th: r}}, "tp_errors": {cls: {err: value at dist_th_tp}},
     "num_gt"/"num_pred": {cls: count after filtering}, "classes", "dist_ths"}``; thresholds keyed as str(float)."""
-    gt = filter_boxes(_as_results(gt, True), class_range, drop_empty_gt)
-    pred = _as_results(pred, False)
-    _check_samples(gt, pred, max_boxes_per_sample, same_samples)
-    pred = filter_boxes(pred, class_range, drop_empty_gt)
+    gt, pred = prepare(gt, pred, class_range, drop_empty_gt, max_boxes_per_sample, same_samples)
     keys = [str(float(th)) for th in dist_ths]
     out = {"classes": list(classes), "dist_ths": [float(t) for t in dist_ths], "AP": {}, "max_recall": {},
            "class_mAP": {}, "tp_errors": {}, "num_gt": {}, "num_pred": {}}
     for name in classes:
-        cc = _class_candidates(gt, pred, name, max(*dist_ths, dist_th_tp))
+        cc = class_candidates(gt, pred, name, max(*dist_ths, dist_th_tp))
         mds = {key: _match(cc, name, float(th)) for key, th in zip(keys, dist_ths)}
         out["AP"][name] = {key: calc_ap(md, min_recall, min_precision) for key, md in mds.items()}
         out["max_recall"][name] = {key: md.max_recall for key, md in mds.items()}
