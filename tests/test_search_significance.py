@@ -41,6 +41,19 @@ def test_point_values_are_the_records_and_seeds_are_averaged():
     assert sig["point"]["x"] == pytest.approx(np.mean([r["metrics"]["car_mAP"] for r in recs[:2]]), abs=1e-4)
 
 
+def test_seeds_that_disagree_widen_the_interval():
+    """Seed 0 says a >> b, seed 1 says b >> a: the seed-averaged difference is exactly 0 on every frame
+    draw, so only resampling the seeds shows how unsure the order is."""
+    gt, noisy = random_scene(n_samples=30, seed=4)
+    recs = [record("a", gt, perfect(gt), 0), record("a", gt, noisy, 1),
+            record("b", gt, noisy, 0), record("b", gt, perfect(gt), 1)]
+    sig = significance.paired_bootstrap(recs, "b", resamples=200)
+    assert sig["seeds"] == 2 and sig["delta"]["a"]["point"] == pytest.approx(0.0, abs=1e-9)
+    low, high = sig["delta"]["a"]["ci95"]
+    assert low < -5 and high > 5
+    assert "over the 30 validation frames and the 2 seeds" in significance.summary(sig)
+
+
 def test_records_without_tables_or_on_other_frames():
     gt, pred = random_scene(n_samples=6)
     recs = [record("a", gt, pred), record("b", gt, pred)]
