@@ -62,6 +62,8 @@ def parse(argv=None) -> argparse.Namespace:
     t.add_argument("--no-augment", action="store_true")
     t.add_argument("--window", type=int, default=96,
                    help="train on overlapping WxW-cell windows of the grid (0 = the whole grid)")
+    t.add_argument("--window-sampling", default="cycle", choices=("cycle", "objects"),
+                   help="cycle the windows, or favour windows holding a box (80 %% of steps; sparse scenes)")
     sh = sub.add_parser("ship", help="package a trained run's weights into dsfec_jax/weights with a manifest")
     sh.add_argument("--model", required=True)
     sh.add_argument("--run-dir", required=True)
@@ -131,7 +133,8 @@ def run_train(args) -> int:
     info = {"command": command_line(args),
             "data": {"source": args.data, "split": args.split}}
     _, _, final = fit(args.model, overrides, frames, val, sched, args.run_dir, args.seed, args.steps,
-                      args.window or None, not args.no_augment, args.eval_every, info)
+                      args.window or None, not args.no_augment, args.eval_every, info,
+                      window_sampling=args.window_sampling)
     print(json.dumps({"run_dir": str(args.run_dir), "final": final}))
     return 0
 

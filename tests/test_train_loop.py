@@ -66,3 +66,31 @@ def test_training_windows_cover_the_grid_with_equal_shapes():
     assert min(w.x_range[0] for w in windows) == 0 and max(w.x_range[1] for w in windows) == 80
     assert min(w.y_range[0] for w in windows) == -40 and max(w.y_range[1] for w in windows) == 40
     assert training_windows(DSFEC_GRID, None) == [DSFEC_GRID] == training_windows(DSFEC_GRID, 160)
+
+
+def test_object_window_sampling_favours_windows_with_boxes():
+    """TJ4D-like sparsity: every car in one of 25 windows. Cycling gives it 1 step in 25; 'objects'
+    about OBJECT_WINDOW_SHARE of the steps, and a batch's window is still a function of its step."""
+    from dsfec_jax.data import batches
+    from dsfec_jax.data.frame import Boxes, Frame
+    from dsfec_jax.grid import TJ4D_GRID
+
+    windows = batches.training_windows(TJ4D_GRID, 96)
+    assert len(windows) == 25
+    car = Boxes(np.array([[20.0, 1.0, 0.0]]), np.array([[1.8, 4.2, 1.5]]), np.zeros(1), np.zeros((1, 2)),
+                np.array(["car"]))
+    frames = [Frame(np.zeros((0, 4), np.float32), ("x", "y", "z", "rcs"), car, f"f{i}") for i in range(4)]
+    specs = [PillarSpec(w, ("x", "y", "z", "rcs"), 8, 2) for w in windows]
+    holding = {i for i, w in enumerate(windows) if w.x_range[0] <= 20 < w.x_range[1] and w.y_range[0] <= 1 < w.y_range[1]}
+
+    def share(sampling):
+        stream = BatchStream(frames, specs, {"car": ("car",)}, 2, 2, seed=0, augment_cfg=None,
+                             window_sampling=sampling)
+        picked = [stream.window(s, [frames[0]]) for s in range(400)]
+        assert picked[:50] == [stream.window(s, [frames[0]]) for s in range(50)]
+        return np.mean([p in holding for p in picked])
+
+    assert share("cycle") == pytest.approx(len(holding) / 25, abs=0.01)
+    assert share("objects") == pytest.approx(batches.OBJECT_WINDOW_SHARE + 0.2 * len(holding) / 25, abs=0.06)
+    with pytest.raises(ValueError, match="window_sampling must be one of"):
+        BatchStream(frames, specs, {}, 2, 2, seed=0, window_sampling="random")

@@ -33,9 +33,11 @@ def state_variables(state: dict) -> dict:
 def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Frame], schedule: Schedule,
         run_dir: str | Path, seed: int = 0, steps: int | None = None, window: int | None = 96,
         augment: bool = True, eval_every: int | None = 200, run_info: dict | None = None,
-        progress: bool = True, init_variables: dict | None = None) -> tuple[zoo.Detector, dict, dict]:
+        progress: bool = True, init_variables: dict | None = None,
+        window_sampling: str = "cycle") -> tuple[zoo.Detector, dict, dict]:
     """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val headline).
-    `init_variables`: start from these trained variables where modules match (train.warm_start)."""
+    `init_variables`: start from these trained variables where modules match (train.warm_start);
+    `window_sampling`: how steps pick their training window (data.batches.BatchStream)."""
     det = zoo.create(model, **overrides)
     cfg = det.config
     windows = [zoo.create(model, **{**overrides, "grid": g}) for g in training_windows(cfg.grid, window)]
@@ -47,13 +49,14 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     # (its 0.16 m grid needs 16 windows of 96 cells); DSFEC compiles one step per window.
     stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], heads, cfg.output_stride,
                          schedule.batch_size, seed, AugmentConfig() if augment else None, targets_fn,
-                         origin_input=center)
+                         origin_input=center, window_sampling=window_sampling)
     total = steps or schedule.total_steps(len(frames))
     spec = RunSpec(Path(run_dir), schedule, seed, total_steps=total, progress=progress)
     info = {**(run_info or {}), "model": model, "overrides": jsonable(overrides),
             "config": jsonable(dataclasses.asdict(cfg)), "schedule": dataclasses.asdict(schedule), "seed": seed,
             "steps": total, "train_frames": len(frames), "val_frames": len(val),
-            "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows], "versions": versions()}
+            "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows],
+            "window_sampling": window_sampling, "versions": versions()}
 
     def validate(state):  # headline figures plus every class's mAP and AP@4 (small enough to log)
         if center:  # the View-of-Delft 3D AP

@@ -94,7 +94,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     with open(log_path, "a") as log:
         for step in bar:
             batch = stream.batch(step)
-            step_fn = step_fns[stream.window(step) % len(step_fns)]
+            step_fn = step_fns[batch["window"] % len(step_fns)]
             state, metrics = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]})
             loss = float(metrics["loss"])
             if not math.isfinite(loss):
