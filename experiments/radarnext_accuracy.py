@@ -47,7 +47,8 @@ def markdown(runs: list[dict]) -> str:
         val = f"{last['mAP']:.2f} ({last['mAP_corridor']:.2f})" if last else "-"
         t = r["test"]
         test = f"{t['mAP']:.2f} ({t['mAP_corridor']:.2f}), {t['frames']} frames" if t else "-"
-        per_class = ", ".join(f"{c} {ap:.2f}" for c, ap in t["AP"].items()) if t else "-"
+        # a class without ground truth in the frames has AP NaN and is left out (as from the mAP)
+        per_class = ", ".join(f"{c} {ap:.2f}" for c, ap in t["AP"].items() if ap == ap) if t else "-"
         lines.append(f"| {r['model']} | {r['steps']} | {val} | {test} | {per_class} |")
     return "\n".join(lines)
 
