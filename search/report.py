@@ -179,16 +179,23 @@ def write_reports(run_dir: str | Path) -> dict:
     columns = columns_for(records)
     table = rows(records, columns)
     title = meta.get("title", "ablation")
-    sig = significance.paired_bootstrap(records, meta.get("base_label")) if columns is COLUMNS else None
+    try:
+        sig = significance.paired_bootstrap(records, meta.get("base_label")) if columns is COLUMNS else None
+    except ValueError as err:  # e.g. a resumed journal whose trials saw other frames: the tables still matter
+        sig, note = None, f"\nNo bootstrap intervals: {err}\n"
+    else:
+        note = ""
     files = ["report.md", "report.csv", "records.json", "map_vs_gflops.png", "map_vs_latency.png"]
     atomic.write_text(run_dir / "report.md",
-                      markdown(table, meta.get("base_label"), title, columns, sig) + provenance(records, meta))
+                      markdown(table, meta.get("base_label"), title, columns, sig) + note + provenance(records, meta))
     atomic.write_text(run_dir / "report.csv", csv_text(table, columns))
     # the match tables stay in the journal: records.json is for reading
     atomic.write_json(run_dir / "records.json", [{k: v for k, v in r.items() if k != "matches"} for r in records])
     if sig is not None:
         atomic.write_json(run_dir / "significance.json", sig)
         files.append("significance.json")
+    else:  # an earlier report's intervals no longer describe this journal
+        (run_dir / "significance.json").unlink(missing_ok=True)
     score = headline(records)
     plot(table, "gflops", run_dir / "map_vs_gflops.png", title, score)
     plot(table, "latency_ms", run_dir / "map_vs_latency.png", title, score)

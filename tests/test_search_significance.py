@@ -75,3 +75,9 @@ def test_report_prints_the_interval_column(tmp_path):
     assert "Δ Car mAP 95 % CI (frames)" in md and "significance.json" in out["files"]
     assert "Evaluation noise (paired bootstrap over the 30 validation frames" in md
     assert "matches" not in (tmp_path / "records.json").read_text()
+    other = {"z": [box("z", 0, 0)]}
+    Journal(tmp_path).append(record("elsewhere", other, perfect(other)))
+    out = report.write_reports(tmp_path)  # the tables are still written, with the reason
+    assert out["significance"] is None and not (tmp_path / "significance.json").exists()
+    assert "No bootstrap intervals: candidate 'elsewhere' was scored on other validation frames" in \
+        (tmp_path / "report.md").read_text()
