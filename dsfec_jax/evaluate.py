@@ -22,9 +22,7 @@ def predict_frames(predictor: Predictor, frames: Sequence[Frame], batch_size: in
 
 def in_grid(boxes, grid):
     """Boxes whose centre lies on the grid: what a detector on that grid can find."""
-    c = boxes.center
-    return boxes.select((c[:, 0] >= grid.x_range[0]) & (c[:, 0] < grid.x_range[1])
-                        & (c[:, 1] >= grid.y_range[0]) & (c[:, 1] < grid.y_range[1]))
+    return boxes.select(grid.contains(boxes.center[:, 0], boxes.center[:, 1]))
 
 
 def score(frames: Sequence[Frame], detections: dict[str, Detections], classes=nuscenes.DSFEC_CLASSES,

@@ -37,6 +37,11 @@ class Grid:
         ny = round((self.y_range[1] - self.y_range[0]) / self.cell)
         return nx, ny
 
+    def contains(self, x, y):
+        """Whether (x, y) (scalars or arrays, metres) lies on the grid: [low, high) on each axis,
+        the cells' own convention."""
+        return (x >= self.x_range[0]) & (x < self.x_range[1]) & (y >= self.y_range[0]) & (y < self.y_range[1])
+
     @property
     def z_center(self) -> float:
         return 0.5 * (self.z_range[0] + self.z_range[1])

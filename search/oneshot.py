@@ -173,7 +173,7 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
         metrics = {kk: result[kk] for kk in ("car_mAP", "car_AP4", "mAP")}
         metrics.update(class_mAP=result["metrics"]["class_mAP"], **{"AP@4": result["metrics"]["AP@4"]})
         journal.append({**trial, "status": "ok", "metrics": metrics,
-                        "matches": significance.matches_entry(result["metrics"]),
+                        "matches": significance.matches_entry(result["metrics"]["match_tables"]),
                         "costs": {c: costs[c] for c in ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")},
                         "supernet": {"stage_blocks": list(cfg.stage_blocks), "steps": steps,
                                      "wall_s": round(supernet_s, 1), "cpu_s": round(supernet_cpu, 1)},

@@ -23,9 +23,9 @@ CLASS = "car"          # the class of the DSFEC tables' headline (Car mAP over 0
 RESAMPLES = 1000
 
 
-def matches_entry(metrics: dict) -> dict:
-    """The record's "matches" field from an evaluation run with match_classes=(CLASS,)."""
-    return {name: table.to_text() for name, table in metrics.get("match_tables", {}).items()}
+def matches_entry(tables: dict[str, MatchTable]) -> dict:
+    """The record's "matches" field: {class: base64 match table} (evaluate.score's "match_tables")."""
+    return {name: table.to_text() for name, table in tables.items()}
 
 
 def candidate_tables(records: list[dict]) -> dict[str, list[MatchTable]] | None:

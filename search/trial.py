@@ -12,9 +12,7 @@ from dsfec_jax import zoo
 from dsfec_jax.data.sources import load_frames
 from dsfec_jax.profile.environment import environment
 from dsfec_jax.profile.records import profile
-from dsfec_jax.evaluate import evaluate
-from dsfec_jax.predict import Predictor
-from dsfec_jax.train.fit import fit, jsonable, state_variables
+from dsfec_jax.train.fit import fit, jsonable
 
 from . import significance
 from .inherit import describe, initial_variables, source_weights
@@ -70,15 +68,18 @@ def measure(trial: dict, trial_dir: Path) -> dict:
     columns = zoo.input_columns(trial["base"])
     frames = load_frames(trial["data"], "train", recipe.train_frames, seed=0, features=columns)
     val = load_frames(trial["data"], "val", recipe.val_frames, seed=0, features=columns)
-    det, state, scores = fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
-                             window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
-                             init_variables=initial_variables(trial.get("init", "scratch")))
+    # DSFEC's nuScenes protocol keeps per-frame Car matches of the final state for the report's intervals
+    dsfec = zoo.config(trial["base"]).family == "dsfec"
+    _, _, scores = fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
+                       window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
+                       init_variables=initial_variables(trial.get("init", "scratch")),
+                       match_classes=(significance.CLASS,) if dsfec else ())
+    tables = scores.pop("match_tables", {})
     # sizes and latency of the inference form (RadarNeXt: MobileOne branches fused), as the paper counts
     deployed = zoo.Detector(zoo.deploy_config(zoo.config(trial["base"], **trial["overrides"])))
     costs = profile([deployed], timing=True, repeats=recipe.latency_repeats, warmup=1, light=recipe.light_profile)[0]
     out = {"metrics": flat_metrics(scores),
            "costs": {k: costs[k] for k in ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")}}
-    if det.config.family == "dsfec":  # the per-frame Car matches of the final state, for the report's intervals
-        result = evaluate(Predictor(det, state_variables(state)), val, match_classes=(significance.CLASS,))
-        out["matches"] = significance.matches_entry(result["metrics"])
+    if tables:
+        out["matches"] = significance.matches_entry(tables)
     return out

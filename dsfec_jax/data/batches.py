@@ -91,7 +91,8 @@ class BatchStream:
         if self.window_sampling == "cycle" or len(self.specs) == 1:
             return step % len(self.specs)
         rng = np.random.default_rng([self.seed, 2_000_003, step])
-        occupied = [w for w, spec in enumerate(self.specs) if any(_holds_a_box(spec.grid, f.boxes) for f in frames)]
+        occupied = [w for w, spec in enumerate(self.specs)
+                    if any(spec.grid.contains(f.boxes.center[:, 0], f.boxes.center[:, 1]).any() for f in frames)]
         if occupied and rng.random() < OBJECT_WINDOW_SHARE:
             return int(occupied[rng.integers(len(occupied))])
         return int(rng.integers(len(self.specs)))
@@ -105,9 +106,3 @@ class BatchStream:
         window = self.window(step, frames)
         return {**collate(frames, self.specs[window], self.head_classes, self.stride, self.targets_fn,
                           self.origin_input), "window": window}
-
-
-def _holds_a_box(grid: Grid, boxes: Boxes) -> bool:
-    c = boxes.center
-    return bool(np.any((c[:, 0] >= grid.x_range[0]) & (c[:, 0] < grid.x_range[1])
-                       & (c[:, 1] >= grid.y_range[0]) & (c[:, 1] < grid.y_range[1])))

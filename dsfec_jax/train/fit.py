@@ -34,10 +34,12 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
         run_dir: str | Path, seed: int = 0, steps: int | None = None, window: int | None = 96,
         augment: bool = True, eval_every: int | None = 200, run_info: dict | None = None,
         progress: bool = True, init_variables: dict | None = None,
-        window_sampling: str = "cycle") -> tuple[zoo.Detector, dict, dict]:
+        window_sampling: str = "cycle", match_classes: Sequence[str] = ()) -> tuple[zoo.Detector, dict, dict]:
     """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val headline).
     `init_variables`: start from these trained variables where modules match (train.warm_start);
-    `window_sampling`: how steps pick their training window (data.batches.BatchStream)."""
+    `window_sampling`: how steps pick their training window (data.batches.BatchStream);
+    `match_classes` (nuScenes protocol): the headline also carries the last validation's
+    "match_tables" (evaluate.score), kept out of the logged metrics."""
     det = zoo.create(model, **overrides)
     cfg = det.config
     windows = [zoo.create(model, **{**overrides, "grid": g}) for g in training_windows(cfg.grid, window)]
@@ -58,15 +60,19 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
             "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows],
             "window_sampling": window_sampling, "versions": versions()}
 
+    last_tables = {}  # the match tables of the latest validation, which the returned headline is
+
     def validate(state):  # headline figures plus every class's mAP and AP@4 (small enough to log)
         if center:  # the View-of-Delft 3D AP
             return evaluate_vod(predictor_for(det, state_variables(state)), val)
-        result = evaluate(Predictor(det, state_variables(state)), val)
+        result = evaluate(Predictor(det, state_variables(state)), val, match_classes=match_classes)
         m = result.pop("metrics")
+        last_tables.update(m.get("match_tables", {}))
         return {**result, "class_mAP": m["class_mAP"], "AP@4": m.get("AP@4", {})}
 
     # with origin inputs one network shaped like a window (windows[0]) trains on every window
     state, scores = train(windows[0] if center else det, stream, spec, info, validate, eval_every or total,
                           window_detectors=None if center else windows,
                           init_variables=init_variables, best_key="mAP" if center else "car_mAP")
-    return det, state, scores if scores is not None else validate(state)
+    scores = scores if scores is not None else validate(state)
+    return det, state, {**scores, "match_tables": dict(last_tables)} if last_tables else scores

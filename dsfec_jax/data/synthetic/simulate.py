@@ -64,9 +64,8 @@ def _in_camera_view(cfg: SyntheticConfig, xy: np.ndarray) -> np.ndarray:
 def _annotated(cfg: SyntheticConfig, actors: Actors) -> np.ndarray:
     """(M,) bool: centre inside the grid now, and (VoD's rule) partly inside the camera view and
     within annotate_range_m."""
-    g = cfg.grid
     x, y = actors.center[:, 0], actors.center[:, 1]
-    inside = (x >= g.x_range[0]) & (x < g.x_range[1]) & (y >= g.y_range[0]) & (y < g.y_range[1])
+    inside = cfg.grid.contains(x, y)
     if cfg.camera_fov_deg < 360:
         corners = bev_corners(actors.center[:, :2], actors.size[:, :2], actors.yaw)   # (M, 4, 2)
         inside &= _in_camera_view(cfg, np.concatenate([corners, actors.center[:, None, :2]], 1)).any(1)
