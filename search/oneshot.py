@@ -15,6 +15,7 @@ training batches, because the supernet's running statistics mix every subnet's a
 from __future__ import annotations
 
 import hashlib
+import json
 import re
 import time
 from pathlib import Path
@@ -33,6 +34,7 @@ from dsfec_jax.models.dsfec import HEAD_NAMES
 from dsfec_jax.predict import Predictor
 from dsfec_jax.profile.environment import environment
 from dsfec_jax.profile.records import profile
+from dsfec_jax.train.fit import jsonable
 from dsfec_jax.train.losses import LossConfig, detection_loss
 from dsfec_jax.train.schedules import optimizer
 from dsfec_jax.train.step import init_state
@@ -43,8 +45,13 @@ from .journal import Journal
 from .recipes import get_recipe
 from .space import SearchSpaceError
 
-CALIBRATION_BATCHES = 8
+# Batch-norm recalibration reads at most this many training batches (one pass over the frames at
+# most). Measured on two saved quick stage-2 supernets: with 8 batches (32 frames) two draws of the
+# calibration frames moved a candidate's Car mAP by up to 1.8 points (rms 1.2) and reordered them;
+# with 64, by at most 0.7 (rms 0.5, mostly a shift shared by every candidate) and never reordered them.
+CALIBRATION_BATCHES = 64
 BN_MOMENTUM = 0.99  # dsfec_jax.layers.conv.batch_norm
+COST_COLUMNS = ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")
 BLOCK = re.compile(r"stage(\d)_block(\d+)$")
 
 
@@ -124,6 +131,13 @@ def recalibrator(supernet):
     return recalibrate
 
 
+def calibration_batches(stream: BatchStream, spec: PillarSpec) -> list[dict]:
+    """The first min(CALIBRATION_BATCHES, one epoch) batches of the training order, unaugmented:
+    distinct training frames, the same for every candidate (so candidates are compared on one draw)."""
+    return [collate([stream.frames[j] for j in stream.indices(s)], spec, stream.head_classes, stream.stride)
+            for s in range(min(CALIBRATION_BATCHES, stream.per_epoch))]
+
+
 def run_oneshot(base: str, trials: list[dict], run_dir: str | Path, retry_failed: bool = False,
                 log=print) -> list[dict]:
     """Train the supernet for these trials (one seed, one recipe) and journal one record each;
@@ -157,8 +171,7 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
                                                 journal.path.parent / supernet_file(trials), log,
                                                 initial_variables(trials[0].get("init", "scratch")))
     recalibrate = recalibrator(supernet)
-    calib = [collate([frames[j] for j in stream.indices(s)], PillarSpec.of(cfg), heads, cfg.output_stride)
-             for s in range(CALIBRATION_BATCHES)]
+    calib = calibration_batches(stream, PillarSpec.of(cfg))
     val = load_frames(data, "val", recipe.val_frames, seed=0)
     predictor = SubnetPredictor(supernet, None, depths[0])
     for trial, depth in zip(trials, depths):
@@ -168,19 +181,36 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
         stats = recalibrate({"params": state["params"], "batch_stats": state["batch_stats"]}, calib, depth)
         predictor.variables, predictor.depth = {"params": state["params"], "batch_stats": stats}, depth
         result = evaluate(predictor, val, match_classes=(significance.CLASS,))
-        costs = profile([zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats,
-                        warmup=1, light=recipe.light_profile)[0]
+        costs = measured_costs(journal, trial) or profile(
+            [zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats, warmup=1,
+            light=recipe.light_profile)[0]
         metrics = {kk: result[kk] for kk in ("car_mAP", "car_AP4", "mAP")}
         metrics.update(class_mAP=result["metrics"]["class_mAP"], **{"AP@4": result["metrics"]["AP@4"]})
         journal.append({**trial, "status": "ok", "metrics": metrics,
                         "matches": significance.matches_entry(result["metrics"]["match_tables"]),
-                        "costs": {c: costs[c] for c in ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")},
+                        "costs": {c: costs[c] for c in COST_COLUMNS},
+                        **({"costs_from": costs["from"]} if "from" in costs else {}),
                         "supernet": {"stage_blocks": list(cfg.stage_blocks), "steps": steps,
                                      "wall_s": round(supernet_s, 1), "cpu_s": round(supernet_cpu, 1)},
                         "wall_s": round(supernet_s / len(trials) + time.perf_counter() - t1, 1),
                         "cpu_s": round(supernet_cpu / len(trials) + time.process_time() - c1, 1),
                         "environment": environment()})
         log(f"    {trial['label']}: car mAP {metrics['car_mAP']:.2f} (inherited weights)")
+
+
+def measured_costs(journal: Journal, trial: dict) -> dict | None:
+    """The costs an earlier seed of the same candidate already measured (sizes and latency belong to
+    the architecture, not to the weights: `--seeds N` profiles each candidate once), with "from": its key."""
+    for r in journal.records():
+        if (r["status"] == "ok" and r["key"] != trial["key"] and
+                all(r.get(k) == as_journaled(trial[k]) for k in ("base", "overrides", "recipe", "strategy"))):
+            return {**r["costs"], "from": r["key"]}
+    return None
+
+
+def as_journaled(value):
+    """How a trial field reads back from the JSON journal (tuples become lists)."""
+    return json.loads(json.dumps(jsonable(value)))
 
 
 def supernet_file(trials: list[dict]) -> str:

@@ -161,9 +161,14 @@ def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path
 
     out = tmp_path / "oneshot"
     assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "oneshot",
-                        "--out", str(out)]) == 0
+                        "--seeds", "2", "--out", str(out)]) == 0
     records = Journal(out).records()
-    assert [r["status"] for r in records] == ["ok", "ok"], [r.get("error") for r in records]
+    assert [r["status"] for r in records] == ["ok"] * 4, [r.get("error") for r in records]
+    assert [r["seed"] for r in records] == [0, 0, 1, 1] and len(list(out.glob("supernet_*.msgpack"))) == 2
+    # a candidate's costs belong to its architecture: the second seed reuses the first seed's profile
+    assert [r.get("costs_from") for r in records] == [None, None, records[0]["key"], records[1]["key"]]
+    assert records[2]["costs"] == records[0]["costs"] and records[3]["costs"] == records[1]["costs"]
+    records = records[:2]
     assert {tuple(r["supernet"]["stage_blocks"]) for r in records} == {(1, 2, 1, 1)}
     assert records[0]["costs"]["gflops"] < records[1]["costs"]["gflops"]
     assert all(r["strategy"] == "oneshot" for r in records)
@@ -205,6 +210,35 @@ def test_supernet_at_a_depth_is_the_subnet_and_trains_only_its_blocks():
     moved = lambda k: any(not np.array_equal(a, b) for a, b in
                           zip(jax.tree.leaves(before[k]), jax.tree.leaves(state["params"][k])))
     assert moved("stage2_block1") and not moved("stage2_block2")
+
+
+def test_recalibration_reads_distinct_frames_and_forgets_the_supernets_running_statistics(monkeypatch):
+    import jax
+    import numpy as np
+    from search import oneshot
+    from dsfec_jax.data.batches import BatchStream
+    from dsfec_jax.data.pillarize import PillarSpec
+    from dsfec_jax.data.sources import load_frames
+    from dsfec_jax.models.dsfec import HEAD_NAMES
+
+    sup = tiny("dsfec_l", stage_blocks=(1, 2, 1, 1))
+    cfg, frames = sup.config, load_frames("synthetic", "train", 10, seed=0)
+    stream = BatchStream(frames, PillarSpec.of(cfg), dict(zip(HEAD_NAMES, cfg.head_classes)), cfg.output_stride, 2, 0)
+    batches = oneshot.calibration_batches(stream, PillarSpec.of(cfg))
+    assert len(batches) == 5  # one epoch: 10 frames in batches of 2, none twice
+    assert sorted(np.concatenate([stream.indices(s) for s in range(5)])) == list(range(10))
+    monkeypatch.setattr(oneshot, "CALIBRATION_BATCHES", 3)
+    assert len(oneshot.calibration_batches(stream, PillarSpec.of(cfg))) == 3
+    # the recalibrated statistics are the subnet's own: whatever running statistics the supernet
+    # carried in (they mix every subnet's activations) must not leak into them
+    variables = sup.init(jax.random.key(0))
+    garbage = jax.tree.map(lambda x: x + 5.0 * np.random.default_rng(1).standard_normal(x.shape), variables["batch_stats"])
+    recalibrate, depth = oneshot.recalibrator(sup), np.array([1, 1, 1, 1], np.int32)
+    a = recalibrate(variables, batches[:2], depth)
+    b = recalibrate({**variables, "batch_stats": garbage}, batches[:2], depth)
+    for x, y, g in zip(jax.tree.leaves(a), jax.tree.leaves(b), jax.tree.leaves(garbage)):
+        np.testing.assert_allclose(x, y, rtol=1e-3, atol=1e-3)
+        assert not np.allclose(x, g)
 
 
 def test_oneshot_resume_reuses_the_saved_supernet(tiny_search, tmp_path):
