@@ -113,11 +113,15 @@ def provenance(records: list[dict], meta: dict) -> str:
     strategy = meta.get("strategy") or (records[0].get("strategy", "train"))
     wall = sum(r.get("wall_s", 0) for r in records)
     line = f"Profile `{meta.get('profile', records[0].get('recipe'))}`, strategy `{strategy}`"
-    nets = {json.dumps(r["supernet"], sort_keys=True) for r in ok if "supernet" in r}
-    if nets:
-        sn = [json.loads(n) for n in nets]
-        line += "; supernet " + ", ".join(f"{tuple(n['stage_blocks'])} trained {n['steps']} steps in {n['wall_s']:.0f} s"
-                                          for n in sn)
+    nets = {}  # (stage blocks, steps) -> {seed: wall s}: one supernet per seed
+    for r in ok:
+        if "supernet" in r:
+            n = r["supernet"]
+            nets.setdefault((tuple(n["stage_blocks"]), n["steps"]), {})[r.get("seed", 0)] = n["wall_s"]
+    for (blocks, steps), walls in nets.items():
+        times = ", ".join(f"{walls[s]:.0f} s" for s in sorted(walls))
+        line += f"; supernet {blocks} trained {steps} steps in {times}" + (
+            f" (seeds {', '.join(map(str, sorted(walls)))})" if len(walls) > 1 else "")
     inits = sorted({r.get("init", "scratch") for r in records})
     line += "; started from " + ", ".join("scratch" if i == "scratch" else f"the shipped `{i}` (elastic depth: each "
                                           "candidate keeps the first k blocks; favours the base's depth)"

@@ -174,6 +174,8 @@ def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path
     assert all(r["strategy"] == "oneshot" for r in records)
     assert all(r["supernet"]["steps"] == 2 for r in records)  # one round: each subnet trained once
     assert all("car" in r["matches"] for r in records) and (out / "significance.json").exists()
+    assert "supernet (1, 2, 1, 1) trained 2 steps in" in (out / "report.md").read_text()
+    assert "(seeds 0, 1)" in (out / "report.md").read_text()  # one supernet per seed, in seed order
     # subnets are prefixes of the supernet: their parameter entries are a subset of its entries
     sub = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 1, 1, 1)))
     sup = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 2, 1, 1)))
