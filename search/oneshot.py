@@ -15,7 +15,6 @@ training batches, because the supernet's running statistics mix every subnet's a
 from __future__ import annotations
 
 import hashlib
-import json
 import re
 import time
 from pathlib import Path
@@ -44,6 +43,7 @@ from .inherit import initial_variables
 from .journal import Journal
 from .recipes import get_recipe
 from .space import SearchSpaceError
+from .trial import COST_COLUMNS
 
 # Batch-norm recalibration reads at most this many training batches (one pass over the frames at
 # most). Measured on two saved quick stage-2 supernets: with 8 batches (32 frames) two draws of the
@@ -51,7 +51,6 @@ from .space import SearchSpaceError
 # with 64, by at most 0.7 (rms 0.5, mostly a shift shared by every candidate) and never reordered them.
 CALIBRATION_BATCHES = 64
 BN_MOMENTUM = 0.99  # dsfec_jax.layers.conv.batch_norm
-COST_COLUMNS = ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")
 BLOCK = re.compile(r"stage(\d)_block(\d+)$")
 
 
@@ -203,14 +202,9 @@ def measured_costs(journal: Journal, trial: dict) -> dict | None:
     the architecture, not to the weights: `--seeds N` profiles each candidate once), with "from": its key."""
     for r in journal.records():
         if (r["status"] == "ok" and r["key"] != trial["key"] and
-                all(r.get(k) == as_journaled(trial[k]) for k in ("base", "overrides", "recipe", "strategy"))):
+                all(r.get(k) == jsonable(trial[k]) for k in ("base", "overrides", "recipe", "strategy"))):
             return {**r["costs"], "from": r["key"]}
     return None
-
-
-def as_journaled(value):
-    """How a trial field reads back from the JSON journal (tuples become lists)."""
-    return json.loads(json.dumps(jsonable(value)))
 
 
 def supernet_file(trials: list[dict]) -> str:

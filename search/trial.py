@@ -18,6 +18,8 @@ from . import significance
 from .inherit import describe, initial_variables, source_weights
 from .recipes import get_recipe
 
+COST_COLUMNS = ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")  # what a record keeps of a profile
+
 
 def trial_key(spec: dict) -> str:
     """Stable identity of a trial (base, overrides, recipe, data, seed)."""
@@ -79,7 +81,7 @@ def measure(trial: dict, trial_dir: Path) -> dict:
     deployed = zoo.Detector(zoo.deploy_config(zoo.config(trial["base"], **trial["overrides"])))
     costs = profile([deployed], timing=True, repeats=recipe.latency_repeats, warmup=1, light=recipe.light_profile)[0]
     out = {"metrics": flat_metrics(scores),
-           "costs": {k: costs[k] for k in ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")}}
+           "costs": {k: costs[k] for k in COST_COLUMNS}}
     if tables:
         out["matches"] = significance.matches_entry(tables)
     return out
