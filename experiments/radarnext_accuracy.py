@@ -7,6 +7,11 @@ the output of `dsfec eval --json` on its best checkpoint. The record keeps, per 
 training command, seed, steps, data, software versions, every validation evaluation (VoD 3D AP,
 entire area and corridor) and the test evaluation, so a README figure can be traced to the run
 that produced it. Prints a Markdown table; --out writes the JSON atomically.
+
+    python -m experiments.radarnext_accuracy RUN_DIR --out FILE --append
+
+adds RUN_DIR to an existing record (a run of the same directory is replaced) without needing the
+older run directories: run directories live under the ignored `runs/`, the record is shipped.
 """
 
 from __future__ import annotations
@@ -53,16 +58,35 @@ def markdown(runs: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def merged(record_path: Path, runs: list[dict], command: str) -> dict:
+    """The record at `record_path` with `runs` added; its invocations are kept in order."""
+    try:
+        old = json.loads(record_path.read_text())
+        # records written before --append existed keep one "command"
+        old_runs, commands = old["runs"], old["commands"] if "commands" in old else [old["command"]]
+    except (OSError, json.JSONDecodeError, KeyError, TypeError) as err:
+        raise SystemExit(f"{record_path}: cannot append to it ({err!r}); expected a record written by --out") from err
+    new_dirs = {r["run_dir"] for r in runs}
+    return {"commands": [*commands, command], "runs": [r for r in old_runs if r["run_dir"] not in new_dirs] + runs}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m experiments.radarnext_accuracy", description=__doc__.split("\n")[0])
     p.add_argument("runs", nargs="+", type=Path)
     p.add_argument("--out", type=Path, default=None)
+    p.add_argument("--append", action="store_true", help="add the runs to the existing record --out")
     args = p.parse_args(argv)
+    if args.append and args.out is None:
+        p.error("--append needs --out FILE (the record to add to)")
     runs = [read_run(r) for r in args.runs]
-    print(markdown(runs))
+    command = "python -m experiments.radarnext_accuracy " + " ".join(map(str, args.runs))
+    if args.append:
+        record = merged(args.out, runs, command + f" --out {args.out} --append")
+    else:
+        record = {"commands": [command], "runs": runs}
+    print(markdown(record["runs"]))
     if args.out:
-        write_json(args.out, {"command": "python -m experiments.radarnext_accuracy " + " ".join(map(str, args.runs)),
-                              "runs": runs})
+        write_json(args.out, record)
     return 0
 
 

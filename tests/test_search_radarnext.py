@@ -100,3 +100,31 @@ def test_accuracy_record_keeps_each_runs_command_evaluations_and_test(tmp_path, 
     (run / "metrics.jsonl").write_text(json.dumps({"step": 3, "eval": {"car_mAP": 1.0}}))
     with pytest.raises(SystemExit, match="line 1: evaluation without 'mAP'"):
         radarnext_accuracy.read_run(run)
+
+
+def test_accuracy_record_appends_a_run_without_the_older_run_directories(tmp_path, capsys):
+    from experiments import radarnext_accuracy
+
+    def make_run(name, test_map):
+        run = tmp_path / name
+        run.mkdir()
+        (run / "run.json").write_text(json.dumps({"model": name, "command": f"dsfec train --model {name}", "seed": 0,
+                                                  "steps": 10, "train_frames": 8, "val_frames": 2, "versions": {}}))
+        (run / "metrics.jsonl").write_text(json.dumps({"step": 10, "eval": {"mAP": 1.0, "mAP_corridor": 1.0}}))
+        (run / "test.json").write_text(json.dumps({"mAP": test_map, "mAP_corridor": 0.0, "AP": {}, "frames": 6}))
+        return run
+
+    out = tmp_path / "record.json"
+    fpn = make_run("radarnext_fpn", 11.0)
+    assert radarnext_accuracy.main([str(fpn), "--out", str(out)]) == 0
+    fpn.rename(tmp_path / "gone")  # the older run directory is not needed to append
+    mdfen = make_run("radarnext_mdfen", 7.0)
+    assert radarnext_accuracy.main([str(mdfen), "--out", str(out), "--append"]) == 0
+    assert radarnext_accuracy.main([str(mdfen), "--out", str(out), "--append"]) == 0  # same run again: replaced
+    record = json.loads(out.read_text())
+    assert [(r["model"], r["test"]["mAP"]) for r in record["runs"]] == [("radarnext_fpn", 11.0), ("radarnext_mdfen", 7.0)]
+    assert len(record["commands"]) == 3 and record["commands"][-1].endswith("--append")
+    assert "| radarnext_fpn |" in capsys.readouterr().out.splitlines()[-2]
+    out.write_text("{}")
+    with pytest.raises(SystemExit, match="record.json: cannot append"):
+        radarnext_accuracy.main([str(mdfen), "--out", str(out), "--append"])
