@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from dsfec_jax.atomic import write_json
@@ -62,8 +63,7 @@ def merged(record_path: Path, runs: list[dict], command: str) -> dict:
     """The record at `record_path` with `runs` added; its invocations are kept in order."""
     try:
         old = json.loads(record_path.read_text())
-        # records written before --append existed keep one "command"
-        old_runs, commands = old["runs"], old["commands"] if "commands" in old else [old["command"]]
+        old_runs, commands = old["runs"], old["commands"]
     except (OSError, json.JSONDecodeError, KeyError, TypeError) as err:
         raise SystemExit(f"{record_path}: cannot append to it ({err!r}); expected a record written by --out") from err
     new_dirs = {r["run_dir"] for r in runs}
@@ -79,11 +79,8 @@ def main(argv=None) -> int:
     if args.append and args.out is None:
         p.error("--append needs --out FILE (the record to add to)")
     runs = [read_run(r) for r in args.runs]
-    command = "python -m experiments.radarnext_accuracy " + " ".join(map(str, args.runs))
-    if args.append:
-        record = merged(args.out, runs, command + f" --out {args.out} --append")
-    else:
-        record = {"commands": [command], "runs": runs}
+    command = "python -m experiments.radarnext_accuracy " + " ".join(sys.argv[1:] if argv is None else argv)
+    record = merged(args.out, runs, command) if args.append else {"commands": [command], "runs": runs}
     print(markdown(record["runs"]))
     if args.out:
         write_json(args.out, record)
