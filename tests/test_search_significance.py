@@ -81,3 +81,18 @@ def test_report_prints_the_interval_column(tmp_path):
     assert out["significance"] is None and not (tmp_path / "significance.json").exists()
     assert "No bootstrap intervals: candidate 'elsewhere' was scored on other validation frames" in \
         (tmp_path / "report.md").read_text()
+
+
+def test_report_names_classes_that_score_zero_in_every_candidate(tmp_path):
+    """'mAP (4 classes)' averages in classes no candidate detects: the report says which."""
+    from search.journal import Journal
+
+    gt, noisy = random_scene(n_samples=6, seed=3)
+    for label, ped in (("a", 0.0), ("b", 0.02)):
+        r = record(label, gt, noisy)
+        r["metrics"]["class_mAP"] = {"car": 0.1, "truck": 0.2, "pedestrian": ped, "bicycle": 0.0}
+        Journal(tmp_path).append(r)
+    report.write_reports(tmp_path)
+    md = (tmp_path / "report.md").read_text()
+    assert "averages the class mAPs of car, truck, pedestrian, bicycle; bicycle scores 0.0 in every candidate" in md
+    assert "pedestrian scores" not in md
