@@ -1,4 +1,6 @@
-"""Atomic file writes: write a temporary file beside the target, fsync, rename over it."""
+"""Atomic file writes: write a temporary file beside the target, fsync, rename over it, fsync
+the directory (the rename lives in the directory's entry table: until that is on disk, a power
+loss can bring back the old file or none)."""
 
 from __future__ import annotations
 
@@ -26,10 +28,20 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
+        sync_dir(path.parent)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def sync_dir(directory: str | os.PathLike) -> None:
+    """fsync a directory, so the renames and new names in it survive a power loss."""
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def write_json(path: str | os.PathLike, obj) -> None:

@@ -14,6 +14,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from .argtypes import non_negative_int, positive_int
+
 RUN_PILLARS = 2048  # pillar slots at run time: radar frames fill < 1000; weights do not depend on it
 
 
@@ -36,9 +38,9 @@ def common(p: argparse.ArgumentParser, split: str) -> None:
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
     p.add_argument("--data", default="synthetic", help="synthetic | synthetic4d | vod:PATH | tj4d:PATH | nuscenes:DATAROOT")
     p.add_argument("--split", default=split)
-    p.add_argument("--frames", type=int, default=None, help="frames to use (synthetic: to generate)")
+    p.add_argument("--frames", type=positive_int, default=None, help="frames to use (synthetic: to generate)")
     p.add_argument("--seed", type=int, default=0, help="data seed (synthetic) and init seed (train)")
-    p.add_argument("--max-pillars", type=int, default=RUN_PILLARS)
+    p.add_argument("--max-pillars", type=positive_int, default=RUN_PILLARS)
 
 
 def command_line(args) -> str:
@@ -53,14 +55,14 @@ def parse(argv=None) -> argparse.Namespace:
     common(t, "train")
     t.add_argument("--run-dir", required=True)
     t.add_argument("--schedule", default="quick", choices=("quick", "paper", "radarnext"))
-    t.add_argument("--steps", type=int, default=None, help="override the schedule's length")
-    t.add_argument("--batch-size", type=int, default=None)
+    t.add_argument("--steps", type=positive_int, default=None, help="override the schedule's length")
+    t.add_argument("--batch-size", type=positive_int, default=None)
     t.add_argument("--decay-at", default=None, metavar="F1,F2",
                    help="fractions of training where the rate drops x0.1 (default: the schedule's)")
-    t.add_argument("--val-frames", type=int, default=100)
-    t.add_argument("--eval-every", type=int, default=200)
+    t.add_argument("--val-frames", type=positive_int, default=100)
+    t.add_argument("--eval-every", type=non_negative_int, default=200, help="validate every N steps (0: at the end only)")
     t.add_argument("--no-augment", action="store_true")
-    t.add_argument("--window", type=int, default=96,
+    t.add_argument("--window", type=non_negative_int, default=96,
                    help="train on overlapping WxW-cell windows of the grid (0 = the whole grid)")
     t.add_argument("--window-sampling", default="cycle", choices=("cycle", "objects"),
                    help="cycle the windows, or favour windows holding a box (80 %% of steps; sparse scenes)")
@@ -68,19 +70,19 @@ def parse(argv=None) -> argparse.Namespace:
     sh.add_argument("--model", required=True)
     sh.add_argument("--run-dir", required=True)
     sh.add_argument("--checkpoint", default="best", choices=("best", "last"))
-    sh.add_argument("--frames", type=int, default=200, help="val and test frames of the family's synthetic benchmark to measure")
+    sh.add_argument("--frames", type=positive_int, default=200, help="val and test frames of the family's synthetic benchmark to measure")
     sh.add_argument("--out-dir", default=None, help="default: the package's weights directory")
     ex = sub.add_parser("export", help="ONNX + jax.export of the network with box decoding (NMS stays on the host)")
     ex.add_argument("--model", required=True)
     ex.add_argument("--weights", default=None, help="weights/checkpoint file (default: shipped weights)")
     ex.add_argument("--out", required=True, help="directory for model.onnx, model.jax_export, deploy.json")
-    ex.add_argument("--top-k", type=int, default=100, help="boxes per head kept by the in-graph decode")
-    ex.add_argument("--max-pillars", type=int, default=RUN_PILLARS)
+    ex.add_argument("--top-k", type=positive_int, default=100, help="boxes per head kept by the in-graph decode")
+    ex.add_argument("--max-pillars", type=positive_int, default=RUN_PILLARS)
     ex.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
     qz = sub.add_parser("quantize", help="static INT8 (onnxruntime) of an export, calibrated on synthetic frames")
     qz.add_argument("--onnx", required=True, help="export directory (dsfec export)")
     qz.add_argument("--out", required=True, help="directory for the INT8 model.onnx and deploy.json")
-    qz.add_argument("--calib-frames", type=int, default=64, help="synthetic train frames to calibrate on")
+    qz.add_argument("--calib-frames", type=positive_int, default=64, help="synthetic train frames to calibrate on")
     qz.add_argument("--seed", type=int, default=0)
     qz.add_argument("--calibration", default="minmax", choices=("minmax", "percentile", "entropy"),
                     help="how activation ranges are set from the calibration frames")
@@ -88,8 +90,8 @@ def parse(argv=None) -> argparse.Namespace:
     b.add_argument("--models", default="baseline,dsfec_l,dsfec_m,dsfec_s")
     b.add_argument("--runtimes", default="jax,onnx,onnx-int8")
     b.add_argument("--threads", default="1", help="comma-separated thread counts, e.g. 1,2")
-    b.add_argument("--repeats", type=int, default=20)
-    b.add_argument("--warmup", type=int, default=3)
+    b.add_argument("--repeats", type=positive_int, default=20)
+    b.add_argument("--warmup", type=non_negative_int, default=3)
     b.add_argument("--out", default=None, help="write bench.json, bench.md and bench.png here")
     b.add_argument("--json", action="store_true", help="print the records as JSON")
     for name, split in (("eval", "test"), ("predict", "test")):
@@ -111,13 +113,14 @@ def parse(argv=None) -> argparse.Namespace:
 
 
 def run_train(args) -> int:
-    from .data.sources import load_frames
+    from .data.sources import NoFrames, load_frames
     from .train.fit import fit
+    from .train.loop import RunMismatch
     from .train.schedules import get_schedule
 
     from . import zoo
 
-    overrides = {"max_pillars": args.max_pillars or zoo.config(args.model).max_pillars, **parse_overrides(args.set)}
+    overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
     changes = {"batch_size": args.batch_size} if args.batch_size else {}
     if args.decay_at:
         try:
@@ -128,20 +131,24 @@ def run_train(args) -> int:
             sys.exit(f"--decay-at {args.decay_at!r}: each fraction must lie in (0, 1)")
     sched = get_schedule(args.schedule, **changes)
     features = zoo.input_columns(args.model)
-    frames = load_frames(args.data, args.split, args.frames or (sched.batch_size * 100), args.seed, features=features)
-    val = load_frames(args.data, "val", args.val_frames, args.seed, features=features)
     info = {"command": command_line(args),
             "data": {"source": args.data, "split": args.split}}
-    _, _, final = fit(args.model, overrides, frames, val, sched, args.run_dir, args.seed, args.steps,
-                      args.window or None, not args.no_augment, args.eval_every, info,
-                      window_sampling=args.window_sampling)
+    try:  # an empty split, or a run directory started with another setup: the user's to fix
+        frames = load_frames(args.data, args.split, args.frames or (sched.batch_size * 100), args.seed,
+                             features=features)
+        val = load_frames(args.data, "val", args.val_frames, args.seed, features=features)
+        _, _, final = fit(args.model, overrides, frames, val, sched, args.run_dir, args.seed, args.steps,
+                          args.window or None, not args.no_augment, args.eval_every, info,
+                          window_sampling=args.window_sampling)
+    except (NoFrames, RunMismatch) as err:
+        sys.exit(f"dsfec train: {err}")
     print(json.dumps({"run_dir": str(args.run_dir), "final": final}))
     return 0
 
 
 def run_eval_or_predict(args) -> int:
     from . import zoo
-    from .data.sources import load_frames
+    from .data.sources import NoFrames, load_frames
     from .evaluate import headline, predict_frames, score, score_vod
 
     if args.runtime == "onnx":
@@ -155,7 +162,10 @@ def run_eval_or_predict(args) -> int:
         overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
         predictor = zoo.load(args.model, weights=args.weights,
                              predictor_options={"score_threshold": args.score_threshold}, **overrides)
-    frames = load_frames(args.data, args.split, args.frames, args.seed, features=zoo.input_columns(args.model))
+    try:
+        frames = load_frames(args.data, args.split, args.frames, args.seed, features=zoo.input_columns(args.model))
+    except NoFrames as err:
+        sys.exit(f"dsfec {args.command}: {err}")
     detections = predict_frames(predictor, frames)
     if args.command == "predict":
         write_predictions(args, frames, detections, predictor)
@@ -204,7 +214,14 @@ def run_ship(args) -> int:
     from .train.loop import checkpoints
 
     run = Path(args.run_dir)
-    source = run / "checkpoints" / "best.msgpack" if args.checkpoint == "best" else checkpoints(run)[-1]
+    if not (run / "run.json").is_file():
+        sys.exit(f"dsfec ship: {run / 'run.json'} missing; expected a run directory written by `dsfec train`")
+    last = checkpoints(run)
+    if args.checkpoint == "last" and not last:
+        sys.exit(f"dsfec ship: {run / 'checkpoints'} holds no step_*.msgpack checkpoint")
+    source = run / "checkpoints" / "best.msgpack" if args.checkpoint == "best" else last[-1]
+    if not source.is_file():
+        sys.exit(f"dsfec ship: {source} missing (no validation has run yet); try --checkpoint last")
     info = json.loads((run / "run.json").read_text())
     # measure with the pillar slots the run validated with (RadarNeXt runs set their own)
     max_pillars = info.get("overrides", {}).get("max_pillars", RUN_PILLARS)
@@ -280,7 +297,12 @@ def run_bench(args) -> int:
         threads = [int(t) for t in args.threads.split(",")]
     except ValueError:
         sys.exit(f"--threads {args.threads!r}: expected comma-separated integers")
-    records = bench.run(models, runtimes, threads, args.repeats, args.warmup)
+    if min(threads) < 1:
+        sys.exit(f"--threads {args.threads!r}: thread counts must be positive")
+    try:
+        records = bench.run(models, runtimes, threads, args.repeats, args.warmup)
+    except (ValueError, RuntimeError) as err:  # e.g. more threads than CPUs, or a failed worker
+        sys.exit(f"dsfec bench: {err}")
     table = bench.markdown(records)
     if args.out:
         command = command_line(args)

@@ -4,6 +4,8 @@ the trial in flight."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable
 
@@ -36,15 +38,44 @@ def run_local(trials: list[dict], run_dir: str | Path, retry_failed: bool = Fals
     return journal.records()
 
 
+def ray_environment(address: str | None, environ: Mapping[str, str]) -> dict[str, str]:
+    """Variables to add to `environ` for ray.init. Token authentication is switched off only for
+    the private local Ray started here (address None), never for a cluster at `address` (anyone
+    who can reach it could run code on it); a value the user set is never overridden."""
+    defaults = {"RAY_USAGE_STATS_ENABLED": "0"}
+    if address is None:
+        defaults["RAY_AUTH_MODE"] = "disabled"
+    return {k: v for k, v in defaults.items() if k not in environ}
+
+
+@contextmanager
+def _environ(extra: dict[str, str]):
+    """os.environ plus `extra` for the block, so a later run in this process (say, attaching
+    to a remote cluster) does not inherit the local run's settings."""
+    import os
+
+    os.environ.update(extra)
+    try:
+        yield
+    finally:
+        for key in extra:
+            os.environ.pop(key, None)
+
+
 def run_ray(trials: list[dict], run_dir: str | Path, address: str | None = None, retry_failed: bool = False,
             cpus_per_trial: float = 1.0, log: Callable[[str], None] = print) -> list[dict]:
     """Run the pending trials as Ray Tune trials (a local Ray started here, or the cluster at
     `address`); each finished trial's record is appended to the journal as it arrives."""
+    import os
+
+    with _environ(ray_environment(address, os.environ)):
+        return _run_ray(trials, run_dir, address, retry_failed, cpus_per_trial, log)
+
+
+def _run_ray(trials, run_dir, address, retry_failed, cpus_per_trial, log) -> list[dict]:
     import json
     import os
 
-    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-    os.environ.setdefault("RAY_AUTH_MODE", "disabled")
     try:
         import ray
         from ray import tune
@@ -67,7 +98,8 @@ def run_ray(trials: list[dict], run_dir: str | Path, address: str | None = None,
 
     started = not ray.is_initialized()
     if started:
-        ray.init(address=address, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True,
+        # "local": always a fresh private Ray, never one found through RAY_ADDRESS (auth is off for it)
+        ray.init(address=address or "local", include_dashboard=False, log_to_driver=False, ignore_reinit_error=True,
                  **({} if address else {"num_cpus": os.cpu_count()}))
     try:
         trainable = tune.with_resources(_ray_trainable, {"cpu": cpus_per_trial})

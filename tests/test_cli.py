@@ -24,6 +24,11 @@ def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
     info = json.loads((run / "run.json").read_text())
     assert info["seed"] == 0 and info["config"]["name"] == "tiny_s" and info["versions"]["jax"]
     assert len(info["windows"]) == 4  # 16x16-cell windows of the 32x32 grid
+    with pytest.raises(SystemExit, match=r"run.json: this run was started with seed=0, steps=3; the command asks "
+                                         r"seed=1, steps=4\. Use a new run directory \(--run-dir\)"):
+        cli.main(["train", "--model", tiny_model, "--steps", "4", "--batch-size", "2", "--frames", "4", "--seed", "1",
+                  "--val-frames", "2", "--eval-every", "3", "--run-dir", str(run), "--max-pillars", "96", "--window", "16"])
+    assert json.loads((run / "run.json").read_text()) == info
     ckpt = sorted((run / "checkpoints").glob("step_*.msgpack"))[-1]
 
     assert cli.main(["eval", "--model", tiny_model, "--weights", str(ckpt), "--frames", "3", "--json",
@@ -88,3 +93,77 @@ def test_overrides_parse_literals():
         "stage_blocks": (1, 3, 3, 2), "act_stem": "mish", "stem_filters": 16}
     with pytest.raises(SystemExit, match="FIELD=VALUE"):
         cli.parse_overrides(["oops"])
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["train", "--model", "dsfec_s", "--run-dir", "r", "--frames", "0"], "--frames"),
+    (["train", "--model", "dsfec_s", "--run-dir", "r", "--val-frames", "0"], "--val-frames"),
+    (["train", "--model", "dsfec_s", "--run-dir", "r", "--steps", "0"], "--steps"),
+    (["train", "--model", "dsfec_s", "--run-dir", "r", "--batch-size", "-2"], "--batch-size"),
+    (["train", "--model", "dsfec_s", "--run-dir", "r", "--window", "-1"], "--window"),
+    (["eval", "--model", "dsfec_s", "--frames", "0"], "--frames"),
+    (["predict", "--model", "dsfec_s", "--out", "p.json", "--max-pillars", "0"], "--max-pillars"),
+    (["ship", "--model", "dsfec_s", "--run-dir", "r", "--frames", "0"], "--frames"),
+    (["quantize", "--onnx", "x", "--out", "y", "--calib-frames", "0"], "--calib-frames"),
+    (["bench", "--repeats", "0"], "--repeats"),
+])
+def test_non_positive_counts_are_refused_naming_the_flag(argv, flag, capsys):
+    """`--frames 0` used to mean 200 frames (train: 100 batches; --steps 0: the whole schedule)."""
+    with pytest.raises(SystemExit):
+        cli.parse(argv)
+    assert f"argument {flag}: expected " in capsys.readouterr().err
+
+
+def test_the_data_commands_refuse_zero_frames(capsys):
+    from dsfec_jax.data import __main__ as data_main
+    from dsfec_jax.data.synthetic import __main__ as synthetic_main
+
+    with pytest.raises(SystemExit):
+        data_main.parse(["inspect", "--source", "synthetic", "--frames", "0"])
+    assert "argument --frames: expected a positive integer, got 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        synthetic_main.parse(["--frames", "0"])
+    assert "argument --frames: expected a positive integer, got 0" in capsys.readouterr().err
+
+
+def test_bench_refuses_zero_threads(monkeypatch):
+    from dsfec_jax.deploy import bench
+
+    monkeypatch.setattr(bench, "run", lambda *a: pytest.fail("benchmarked with 0 threads"))
+    with pytest.raises(SystemExit, match="--threads '1,0': thread counts must be positive"):
+        cli.main(["bench", "--models", "dsfec_s", "--runtimes", "jax", "--threads", "1,0"])
+
+
+def test_empty_inputs_get_an_error_not_a_number(shared_data, tiny_model, tmp_path):
+    """The VoD example set has 3 frames: its 'test' split (85-100 %) holds none. Scoring it, or
+    asking for 0 frames, must say so instead of returning a score of nothing."""
+    from dsfec_jax.data.sources import NoFrames, load_frames
+    from dsfec_jax.train.fit import fit
+    from dsfec_jax.train.schedules import get_schedule
+
+    vod = f"vod:{shared_data / 'vod' / 'example_set'}"
+    with pytest.raises(NoFrames, match=r"split 'test' is empty: the source has 3 frames and the split takes 85% to 100%"):
+        load_frames(vod, "test")
+    assert len(load_frames(vod, "val")) == 1
+    for data in ("synthetic", vod):
+        with pytest.raises(NoFrames, match="frames=0: expected a positive number of frames"):
+            load_frames(data, "all" if data == vod else "train", 0)
+    with pytest.raises(SystemExit, match="dsfec eval: --data vod:.*split 'test' is empty"):
+        cli.main(["eval", "--model", "dsfec_s", "--data", vod, "--split", "test"])
+    frames = load_frames("synthetic", "train", 2)
+    with pytest.raises(ValueError, match="fit: 0 validation frames; expected at least 1"):
+        fit(tiny_model, {}, frames, [], get_schedule("quick"), tmp_path / "run")
+    with pytest.raises(ValueError, match="fit: 0 steps; expected at least 1"):
+        fit(tiny_model, {}, frames, frames, get_schedule("quick"), tmp_path / "run", steps=0)
+
+
+def test_ship_without_a_checkpoint_says_what_is_missing(tiny_model, tmp_path):
+    run = tmp_path / "run"
+    with pytest.raises(SystemExit, match="run.json missing"):
+        cli.main(["ship", "--model", tiny_model, "--run-dir", str(run)])
+    run.mkdir()
+    (run / "run.json").write_text("{}")
+    with pytest.raises(SystemExit, match="holds no step_"):
+        cli.main(["ship", "--model", tiny_model, "--run-dir", str(run), "--checkpoint", "last"])
+    with pytest.raises(SystemExit, match="best.msgpack missing"):
+        cli.main(["ship", "--model", tiny_model, "--run-dir", str(run)])

@@ -359,8 +359,33 @@ def test_load_frames_native_vod_maps_classes_and_drops_the_rest(shared_data):
     raw = kitti.read_vod_frame(vod_root(shared_data), "01047")
     assert frame.point_features == kitti.VOD_FEATURES and np.array_equal(frame.points, raw.points)
     assert set(frame.boxes.names) == {"car", "pedestrian", "bicycle"}  # cyclist -> bicycle
-    kept = np.isin(raw.boxes.names, ["car", "pedestrian", "bicycle", "cyclist"])
-    assert len(frame.boxes) == kept.sum()  # rider, bicycle_rack, moped_scooter dropped
+    kept = np.isin(raw.boxes.names, ["car", "pedestrian", "cyclist"])
+    assert len(frame.boxes) == kept.sum()  # parked bicycles, rider, bicycle_rack, moped_scooter dropped
+    assert (frame.boxes.names == "bicycle").sum() == (raw.boxes.names == "cyclist").sum() == 4
+    # the label rows (2D boxes for VoD's 40 px rule) stay aligned with the kept boxes
+    np.testing.assert_array_equal(frame.meta["kitti_labels"].bbox, raw.meta["kitti_labels"].bbox[kept])
+    assert frame.meta["image_size"] == kitti.VOD_IMAGE_SIZE == (1936, 1216)
+
+
+def test_class_maps_per_source_keep_the_canonical_bicycle():
+    """The VRU class is "bicycle" (ridden) in the synthetic and nuScenes sources; in VoD a 'bicycle'
+    has no rider (parked) and, as in VoD's evaluation, is no class, while its 'cyclist' is ours."""
+    from dsfec_jax.data.frame import Boxes, Frame
+    from dsfec_jax.data.sources import canonical_classes, to_dsfec_frame
+
+    names = np.array(["bicycle", "cyclist", "rider", "pedestrian"])
+    boxes = Boxes(np.arange(12, dtype=np.float32).reshape(4, 3), np.ones((4, 3), np.float32), np.zeros(4, np.float32),
+                  np.zeros((4, 2), np.float32), names)
+    points = np.zeros((1, 7), np.float32)
+
+    def mapped(source, fn=canonical_classes):
+        return list(fn(Frame(points, kitti.VOD_FEATURES, boxes, source=source)).boxes.names)
+
+    assert mapped("vod") == mapped("tj4d") == ["bicycle", "pedestrian"]  # the cyclist's box
+    assert mapped("synthetic") == mapped("nuscenes") == ["bicycle", "pedestrian"]  # the bicycle's box
+    vod = canonical_classes(Frame(points, kitti.VOD_FEATURES, boxes, source="vod"))
+    np.testing.assert_array_equal(vod.boxes.center, boxes.center[[1, 3]])
+    assert mapped("synthetic", to_dsfec_frame) == ["bicycle", "pedestrian"]  # synthetic4d with DSFEC columns
 
 
 def test_load_frames_synthetic4d_and_errors():

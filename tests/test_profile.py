@@ -1,10 +1,12 @@
 import json
+from pathlib import Path
 
 import jax
 import pytest
 
 from dsfec_jax import zoo
-from dsfec_jax.profile import compare, count_gflops, count_params, layer_macs, paper
+from dsfec_jax.profile import compare, count_gflops, count_params, counting, layer_macs, paper
+from dsfec_jax.profile.counting import compile_network, xla_gflops
 from dsfec_jax.profile.__main__ import main as profile_main
 from dsfec_jax.profile.memory import paper_memory_mb
 from dsfec_jax.profile.records import profile, size_record
@@ -20,15 +22,18 @@ def params(name, **kw):
     return count_params(jax.eval_shape(det.init, jax.random.key(0)))["total"]
 
 
-@pytest.mark.parametrize("name,tol", [("baseline", 0.05), ("dsfec_l", 0.05), ("dsfec_m", 0.15), ("dsfec_s", 0.15)])
-def test_table1_sizes_within_tolerance(name, tol):
+# README: Baseline, DSFEC-L and the Table 3 row land within 2 % of the paper's params and GFLOPs
+# (measured: params +1.9 / +1.2 %, GFLOPs -0.1 / -0.4 %, Table 3 -0.01 %), and the fitted M / S
+# sizes print beside the paper's (params +0.9 / -1.0 %, GFLOPs -0.6 / -0.8 %).
+@pytest.mark.parametrize("name", ["baseline", "dsfec_l", "dsfec_m", "dsfec_s"])
+def test_table1_sizes_within_2_percent(name):
     ref = paper.TABLE1[name]
-    assert abs(params(name) / ref["params"] - 1) <= tol
-    assert abs(gflops(name) / ref["gflops"] - 1) <= tol
+    assert abs(params(name) / ref["params"] - 1) <= 0.02
+    assert abs(gflops(name) / ref["gflops"] - 1) <= 0.02
 
 
-def test_table3_stage2_blocks_row():
-    assert abs(gflops("dsfec_l", stage_blocks=(3, 3, 6, 3)) / paper.TABLE3[3]["gflops"] - 1) <= 0.05
+def test_table3_stage2_blocks_row_within_2_percent():
+    assert abs(gflops("dsfec_l", stage_blocks=(3, 3, 6, 3)) / paper.TABLE3[3]["gflops"] - 1) <= 0.02
 
 
 @pytest.mark.parametrize("filters", [32, 16, 12, 8])
@@ -49,12 +54,29 @@ def test_layer_macs_by_hand_for_the_stem():
     assert stem == [160 * 160 * 9 * 12 * 12]
 
 
-def test_analytic_gflops_match_xla_and_record_keys():
+def test_record_keys_and_per_stage_sums():
     det = tiny("dsfec_m")
     rec = size_record(det)
-    assert abs(rec["xla_vs_analytic"]) < 0.05
+    # On a 32 x 32 grid XLA counts 2-5 % *less* than 2 x MAC: its cost analysis skips the taps that
+    # fall on 'SAME' padding, a large share of a tiny map; the README's 2 % is for the full grid.
+    assert -0.05 < rec["xla_vs_analytic"] < 0
     assert sum(rec["params_per_stage"].values()) == rec["params"]
     assert abs(sum(rec["gflops_per_stage"].values()) - rec["gflops"]) < 1e-3
+
+
+def test_xla_flops_agree_with_analytic_within_2_percent_on_the_full_grid():
+    """README: XLA's own count (elementwise work added) agrees within 2 %. DSFEC-S has the largest
+    gap of the four (+1.51 %; M +1.37, L +0.68, Baseline +0.57 %): compiled from shapes only."""
+    det = zoo.create("dsfec_s")
+    compiled = compile_network(det, jax.eval_shape(det.init, jax.random.key(0)), det.dummy_inputs(1))
+    assert 0 < xla_gflops(compiled) / count_gflops(det)["total"] - 1 <= 0.02
+
+
+def test_published_zoo_records_keep_xla_within_2_percent():
+    records = json.loads((Path(counting.__file__).parent / "records" / "zoo.json").read_text())["records"]
+    assert {r["model"] for r in records} == set(zoo.available("dsfec"))
+    gaps = {r["model"]: r["xla_vs_analytic"] for r in records}
+    assert all(abs(g) <= 0.02 for g in gaps.values()), gaps
 
 
 def test_latency_records_per_stage():

@@ -32,19 +32,51 @@ def test_batches_are_a_pure_function_of_the_step(tmp_path):
     assert sorted(np.concatenate([stream.indices(s) for s in range(3)]).tolist()) == list(range(6))
 
 
-def test_resumed_run_ends_with_the_same_parameters(tmp_path):
+def test_resumed_run_ends_with_the_same_parameters(tmp_path, caplog):
+    """Stopped after step 3, and as if killed twice: while saving step 3 (its manifest never
+    landed) and while logging step 4 (a torn last line). The resume goes back to step 2."""
     det, stream, spec = setup(tmp_path, "straight")
     straight, _ = train(det, stream, spec, {"test": True})
     det, stream, spec = setup(tmp_path, "resumed", stop_at=3)
     train(det, stream, spec, {"test": True})
     assert [p.name for p in checkpoints(spec.run_dir)] == ["step_0000002.msgpack", "step_0000003.msgpack"]
+    checkpoint.manifest_path(checkpoints(spec.run_dir)[-1]).unlink()
+    log_path = spec.run_dir / "metrics.jsonl"
+    log_path.write_text(log_path.read_text() + '{"step": 4, "frames_per_s": 1')
     det, stream, spec = setup(tmp_path, "resumed")
     resumed, _ = train(det, stream, spec, {"test": True})
     assert int(resumed["step"]) == int(straight["step"]) == 6
     jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7), straight["params"], resumed["params"])
-    steps = [json.loads(l)["step"] for l in (spec.run_dir / "metrics.jsonl").read_text().splitlines()]
+    steps = [json.loads(l)["step"] for l in log_path.read_text().splitlines()]
     assert steps == [1, 2, 3, 4, 5, 6]
-    assert len(checkpoints(spec.run_dir)) == 2  # keep=2
+    assert [p.name for p in checkpoints(spec.run_dir)] == ["step_0000004.msgpack", "step_0000006.msgpack"]  # keep=2
+    assert all(checkpoint.problem(p) is None for p in checkpoints(spec.run_dir))
+    assert "step_0000003.msgpack.json: manifest missing" in caplog.text
+    assert f"{log_path}: dropped its torn last line" in caplog.text
+
+
+def test_a_resume_must_ask_for_the_setup_the_run_started_with(tmp_path):
+    """run.json is the run's provenance: a resume with another seed or length is refused, naming
+    the fields, and leaves it untouched; a true resume (another command line, other versions) is
+    appended to its "resumes". A run stopped before its first checkpoint is held to it too."""
+    from dsfec_jax.train.loop import RunMismatch
+
+    started = {"command": "dsfec train --seed 3", "seed": 3, "steps": 6, "config": {"stem_filters": 8, "act": "relu"},
+               "versions": {"jax": "0.1"}}
+    det, stream, spec = setup(tmp_path, "run", stop_at=0)
+    train(det, stream, spec, started)
+    assert not checkpoints(spec.run_dir)
+    run_json = (spec.run_dir / "run.json").read_text()
+    asked = {**started, "seed": 4, "steps": 7, "config": {"stem_filters": 8, "act": "mish"}}
+    with pytest.raises(RunMismatch, match=r"run\.json: this run was started with seed=3, steps=6, config\.act=\"relu\"; "
+                                          r"the command asks seed=4, steps=7, config\.act=\"mish\"\. Use a new run directory"):
+        train(det, stream, spec, asked)
+    assert (spec.run_dir / "run.json").read_text() == run_json
+    train(det, stream, spec, {**started, "command": "dsfec train --seed 3 --eval-every 5", "versions": {"jax": "0.2"}})
+    info = json.loads((spec.run_dir / "run.json").read_text())
+    assert info["command"] == started["command"] and info["versions"] == {"jax": "0.1"}
+    assert [{k: r[k] for k in ("from_step", "command", "versions")} for r in info["resumes"]] == [
+        {"from_step": 0, "command": "dsfec train --seed 3 --eval-every 5", "versions": {"jax": "0.2"}}]
 
 
 def test_divergence_stops_with_the_last_good_checkpoint_intact(tmp_path):

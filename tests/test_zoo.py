@@ -117,3 +117,19 @@ def test_every_shipped_weights_file_loads_and_records_how_it_was_made(path):
     points = np.column_stack([rng.uniform(0, 16, 50), rng.uniform(-8, 8, 50), rng.normal(0, 1, (50, 5))])
     out = predictor(points.astype(np.float32))
     assert len(out.boxes) == len(out.scores) and np.isfinite(out.scores).all()
+
+
+def deployed_params(name: str, **overrides) -> int:
+    """Parameters of the inference (fused) form, as README's RadarNeXt table counts them."""
+    det = zoo.create(name, **overrides)
+    shapes = jax.eval_shape(det.init, jax.random.key(0))
+    _, fused = zoo.deploy(det, jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), shapes))
+    return sum(int(np.prod(x.shape)) for x in jax.tree.leaves(fused["params"]))
+
+
+# README's RadarNeXt rows that tests/test_radarnext.py does not pin exactly: the Dense FPN
+# (4,856,716, 131 k above the paper) and DCNv3 at position 3 (1.547 M where the paper says 1.630 M).
+@pytest.mark.parametrize("name,overrides,expected", [("radarnext_fpn_dense", {}, 4_856_716),
+                                                     ("radarnext_mdfen", {"dcn_positions": (3,)}, 1_547_448)])
+def test_radarnext_sizes_printed_in_the_readme(name, overrides, expected):
+    assert deployed_params(name, **overrides) == expected

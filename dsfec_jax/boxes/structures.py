@@ -18,12 +18,17 @@ class Boxes:
     yaw: np.ndarray       # (M,) float32
     velocity: np.ndarray  # (M, 2) float32, (vx, vy); zeros where unknown
     names: np.ndarray     # (M,) str, class names ('car', 'truck', 'pedestrian', 'bicycle', ...)
+    # (M,) int, lidar + radar points inside each ground-truth box (the nuScenes devkit's num_pts,
+    # which drops boxes with 0); -1 where unknown; None when the source has no counts (synthetic)
+    num_pts: np.ndarray | None = None
 
     def __post_init__(self):
         m = len(self.names)
         for field, shape in (("center", (m, 3)), ("size", (m, 3)), ("yaw", (m,)), ("velocity", (m, 2))):
             if np.shape(getattr(self, field)) != shape:
                 raise ValueError(f"Boxes.{field} has shape {np.shape(getattr(self, field))}; expected {shape}")
+        if self.num_pts is not None and np.shape(self.num_pts) != (m,):
+            raise ValueError(f"Boxes.num_pts has shape {np.shape(self.num_pts)}; expected {(m,)} or None")
 
     def __len__(self) -> int:
         return len(self.names)
@@ -35,4 +40,6 @@ class Boxes:
                    np.zeros((0,), dtype="<U16"))
 
     def select(self, keep) -> "Boxes":
-        return Boxes(self.center[keep], self.size[keep], self.yaw[keep], self.velocity[keep], self.names[keep])
+        # every field is per box: optional ones (None) stay None
+        return dataclasses.replace(self, **{f.name: getattr(self, f.name)[keep] for f in dataclasses.fields(self)
+                                            if getattr(self, f.name) is not None})

@@ -10,6 +10,7 @@ import argparse
 import json
 import sys
 
+from ..argtypes import positive_int
 from .inspect import DSFEC_SPEC, SOURCES, format_summary, load, pillarize_rate, summarize
 
 
@@ -20,7 +21,7 @@ def parse(argv=None) -> argparse.Namespace:
     i.add_argument("target", nargs="?", default="", help="a path (real sources) or a split name (synthetic)")
     i.add_argument("--source", required=True, choices=SOURCES)
     i.add_argument("--split", default=None, help="synthetic split: train, val or test (default val)")
-    i.add_argument("--frames", type=int, default=20, help="synthetic: number of frames")
+    i.add_argument("--frames", type=positive_int, default=20, help="synthetic: number of frames")
     i.add_argument("--seed", type=int, default=0)
     i.add_argument("--json", action="store_true")
     return p.parse_args(argv)

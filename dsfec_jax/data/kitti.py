@@ -30,6 +30,14 @@ VOD_FEATURES = ("x", "y", "z", "rcs", "v_r", "v_r_comp", "time")
 TJ4D_FEATURES = ("x", "y", "z", "v_r", "range", "power", "alpha", "beta")
 CALIB_SHAPES = {"P2": (3, 4), "R0_rect": (3, 3), "Tr_velo_to_cam": (3, 4)}
 IGNORED_CLASSES = ("dontcare",)
+# VoD's camera image, 1936 x 1216 pixels (VoD's README; the example_set JPEGs): what its 2D boxes are clipped to.
+VOD_IMAGE_SIZE = (1936, 1216)
+# VoD's radar -> camera extrinsic: Tr_velo_to_cam of radar/training/calib in VoD's public example_set (the
+# same in its three frames; R0_rect is the identity there). The nominal calibration for frames that carry
+# none, i.e. the VoD-like synthetic 4D benchmark: the camera sits ~1.4 m behind and ~1 m above the radar.
+VOD_RADAR_TO_CAMERA = np.array([[-0.013857, -0.9997468, 0.01772762, 0.05283124],
+                                [0.10934269, -0.01913807, -0.99381983, 0.98100483],
+                                [0.99390751, -0.01183297, 0.1095802, 1.44445002]])
 
 
 def _fail(path, what: str) -> ValueError:
@@ -203,13 +211,14 @@ def list_frames(root, split: str = "training", radar_dir: str = "radar") -> list
 
 
 def _frame(frame_id: str, source: str, points: np.ndarray, features: tuple[str, ...], dropped: int,
-           calib: KittiCalib, labels: KittiLabels, label_path: Path, upright_from_cam: np.ndarray | None) -> Frame:
+           calib: KittiCalib, labels: KittiLabels, label_path: Path, upright_from_cam: np.ndarray | None,
+           **extra_meta) -> Frame:
     ignored = np.isin(np.char.lower(labels.names.astype(str)), IGNORED_CLASSES)
     kept = labels.select(~ignored)
     boxes = kitti_to_boxes(kept, calib.sensor_from_cam(), upright_from_cam)
     meta = {"dropped_nonfinite": dropped, "dropped_dontcare": int(ignored.sum()), "calib": calib,
             "kitti_labels": kept, "label_path": str(label_path),
-            "upright_frame": "camera" if upright_from_cam is None else "lidar"}
+            "upright_frame": "camera" if upright_from_cam is None else "lidar", **extra_meta}
     return Frame(points, features, boxes, frame_id=str(frame_id), source=source, meta=meta)
 
 
@@ -219,6 +228,8 @@ def read_vod_frame(root, frame_id, split: str = "training", radar_dir: str = "ra
     Labels come from <radar_dir>/<split>/label_2/<id>.txt, or lidar/<split>/label_2/ where the radar
     folder holds VoD's raw JSON instead (the public example_set). Boxes are upright in the LiDAR frame
     when lidar/<split>/calib/<id>.txt exists (VoD's definition), else in the camera frame.
+    meta["kitti_labels"] keeps the label rows (their 2D boxes) aligned with the boxes; meta["image_size"]
+    is VoD's camera image size.
     """
     root, frame_id = Path(root), str(frame_id)
     radar = root / radar_dir / split
@@ -230,7 +241,7 @@ def read_vod_frame(root, frame_id, split: str = "training", radar_dir: str = "ra
     lidar_calib_path = root / "lidar" / split / "calib" / f"{frame_id}.txt"
     upright = read_calib(lidar_calib_path).sensor_from_cam() if lidar_calib_path.exists() else None
     return _frame(frame_id, "vod", points, VOD_FEATURES, dropped, calib, read_kitti_labels(label_path),
-                  label_path, upright)
+                  label_path, upright, image_size=VOD_IMAGE_SIZE)
 
 
 def read_tj4d_frame(root, frame_id, split: str = "training") -> Frame:
@@ -249,6 +260,7 @@ def boxes_with_points(frame: Frame, margin_xy: float = 0.2, margin_z: float = 0.
     return box_point_counts(frame.points[:, :3], b.center, b.size, b.yaw, margin_xy, margin_z) > 0
 
 
-__all__ = ["VOD_FEATURES", "TJ4D_FEATURES", "KittiCalib", "KittiLabels", "read_radar_bin", "read_calib",
+__all__ = ["VOD_FEATURES", "TJ4D_FEATURES", "VOD_IMAGE_SIZE", "VOD_RADAR_TO_CAMERA", "KittiCalib", "KittiLabels",
+           "read_radar_bin", "read_calib",
            "read_kitti_labels", "kitti_to_boxes", "list_frames", "read_vod_frame", "read_tj4d_frame",
            "boxes_with_points"]

@@ -8,18 +8,18 @@ WIDTH x HEIGHT rows are read and trailing bytes are ignored, as the nuScenes dev
 tables: points of the 5 radar channels (optionally several sweeps each, following `prev` links)
 moved into the ego frame of a reference channel's key frame, and annotations moved from the
 global frame into that same ego frame. Quaternions are (w, x, y, z), as nuScenes stores them.
+The tables, with their field checks and path rule, are `nuscenes_tables.NuScenesTables`.
 """
 
 from __future__ import annotations
 
-import json
-import re
 from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
 
 from dsfec_jax.data.frame import Boxes, Frame
+from dsfec_jax.data.nuscenes_tables import NuScenesTables, list_samples  # re-exported: frames are read from them
 
 RADAR_FIELDS = ("x", "y", "z", "dyn_prop", "id", "rcs", "vx", "vy", "vx_comp", "vy_comp", "is_quality_valid",
                 "ambig_state", "x_rms", "y_rms", "invalid_state", "pdh0", "vx_rms", "vy_rms")
@@ -203,82 +203,13 @@ def pose_matrix(translation: Sequence[float], rotation: Sequence[float], inverse
     return m
 
 
-# --------------------------------------------------------------------------- tables
-
-
-class NuScenesTables:
-    """The JSON tables of one nuScenes version, indexed by token. Load once, read many frames."""
-
-    TABLES = ("sample", "sample_data", "ego_pose", "calibrated_sensor", "sample_annotation", "instance", "category")
-
-    def __init__(self, dataroot, version: str | None = None):
-        self.dataroot = Path(dataroot)
-        self.version = version or _only_version(self.dataroot)
-        self.tables = {name: self._load(name) for name in self.TABLES}
-        sensor_path = self.dataroot / self.version / "sensor.json"
-        self.tables["sensor"] = self._load("sensor") if sensor_path.exists() else {}
-        self._key_frames = {(sd["sample_token"], self.channel(sd)): sd for sd in self.tables["sample_data"].values()
-                            if sd.get("is_key_frame", False)}
-        self._annotations: dict[str, list[dict]] = {}
-        for ann in self.tables["sample_annotation"].values():
-            self._annotations.setdefault(ann["sample_token"], []).append(ann)
-
-    def _load(self, name: str) -> dict[str, dict]:
-        path = self.dataroot / self.version / f"{name}.json"
-        try:
-            records = json.loads(path.read_text())
-            return {r["token"]: r for r in records}
-        except (json.JSONDecodeError, UnicodeDecodeError, TypeError, KeyError) as e:
-            raise _fail(path, f"expected a JSON list of records with a 'token' ({type(e).__name__}: {e})") from None
-
-    def get(self, table: str, token: str) -> dict:
-        try:
-            return self.tables[table][token]
-        except KeyError:
-            raise KeyError(f"{self.dataroot / self.version}: table {table!r} has no token {token!r}") from None
-
-    def channel(self, sd: dict) -> str:
-        """Sensor channel of a sample_data record: via sensor.json, else from the file name."""
-        cs = self.tables["calibrated_sensor"].get(sd.get("calibrated_sensor_token", ""), {})
-        sensor = self.tables["sensor"].get(cs.get("sensor_token", ""))
-        if sensor is not None:
-            return sensor["channel"]
-        match = re.search(r"__([A-Z_]+)__", sd.get("filename", ""))
-        return match.group(1) if match else ""
-
-    def key_frame(self, sample_token: str, channel: str) -> dict | None:
-        return self._key_frames.get((sample_token, channel))
-
-    def annotations(self, sample_token: str) -> list[dict]:
-        return self._annotations.get(sample_token, [])
-
-    def category_name(self, ann: dict) -> str:
-        if "category_name" in ann:  # the devkit adds it in memory; accept tables that already carry it
-            return ann["category_name"]
-        instance = self.get("instance", ann["instance_token"])
-        return self.get("category", instance["category_token"])["name"]
-
-
-def _only_version(dataroot: Path) -> str:
-    versions = sorted(p.name for p in dataroot.glob("v1.0-*") if p.is_dir())
-    if len(versions) != 1:
-        raise FileNotFoundError(f"{dataroot}: expected exactly one v1.0-*/ table folder, found {versions}; "
-                                f"pass version=")
-    return versions[0]
-
-
-def list_samples(tables: NuScenesTables) -> list[str]:
-    """Sample tokens ordered by timestamp."""
-    return [s["token"] for s in sorted(tables.tables["sample"].values(), key=lambda s: s["timestamp"])]
-
-
 # --------------------------------------------------------------------------- frames
 
 
 def _sensor_to_ref(tables: NuScenesTables, sd: dict, ref_from_global: np.ndarray) -> np.ndarray:
     """(4, 4) sensor frame of this sweep -> reference ego frame, through the global frame."""
-    cs = tables.get("calibrated_sensor", sd["calibrated_sensor_token"])
-    pose = tables.get("ego_pose", sd["ego_pose_token"])
+    cs = tables.follow("sample_data", sd, "calibrated_sensor_token", "calibrated_sensor")
+    pose = tables.follow("sample_data", sd, "ego_pose_token", "ego_pose")
     return (ref_from_global @ pose_matrix(pose["translation"], pose["rotation"])
             @ pose_matrix(cs["translation"], cs["rotation"]))
 
@@ -287,7 +218,7 @@ def _sweeps(tables: NuScenesTables, sd: dict, nsweeps: int) -> list[dict]:
     """The key frame and up to nsweeps - 1 earlier sweeps of the same channel (prev links)."""
     out = [sd]
     while len(out) < nsweeps and out[-1].get("prev"):
-        out.append(tables.get("sample_data", out[-1]["prev"]))
+        out.append(tables.follow("sample_data", out[-1], "prev", "sample_data"))
     return out
 
 
@@ -295,7 +226,7 @@ def _channel_points(tables: NuScenesTables, sd: dict, nsweeps: int, ref_from_glo
                     filters: dict) -> tuple[list[np.ndarray], int]:
     chunks, dropped = [], 0
     for sweep in _sweeps(tables, sd, nsweeps):
-        pcd, n_bad = drop_nonfinite(read_radar_pcd(tables.dataroot / sweep["filename"]))
+        pcd, n_bad = drop_nonfinite(read_radar_pcd(tables.file(sweep)))
         dropped += n_bad
         dt = ref_time - 1e-6 * sweep["timestamp"]  # positive for past sweeps, as the devkit's time_lag
         chunks.append(radar_features(filter_radar_points(pcd, **filters),
@@ -304,13 +235,14 @@ def _channel_points(tables: NuScenesTables, sd: dict, nsweeps: int, ref_from_glo
 
 
 def _sample_time(tables: NuScenesTables, ann: dict) -> float:
-    return 1e-6 * tables.get("sample", ann["sample_token"])["timestamp"]
+    return 1e-6 * tables.follow("sample_annotation", ann, "sample_token", "sample")["timestamp"]
 
 
 def annotation_velocity(tables: NuScenesTables, ann: dict, max_time_diff: float = 1.5) -> np.ndarray:
     """Global (vx, vy, vz) from the prev/next annotations (devkit box_velocity); NaN when unknown."""
-    first = tables.get("sample_annotation", ann["prev"]) if ann.get("prev") else ann
-    last = tables.get("sample_annotation", ann["next"]) if ann.get("next") else ann
+    ann = tables.check("sample_annotation", ann)
+    first = tables.follow("sample_annotation", ann, "prev", "sample_annotation") if ann.get("prev") else ann
+    last = tables.follow("sample_annotation", ann, "next", "sample_annotation") if ann.get("next") else ann
     if first is last:
         return np.full(3, np.nan)
     span = _sample_time(tables, last) - _sample_time(tables, first)
@@ -319,6 +251,14 @@ def annotation_velocity(tables: NuScenesTables, ann: dict, max_time_diff: float 
     if span <= 0 or span > limit:
         return np.full(3, np.nan)
     return (np.asarray(last["translation"], np.float64) - np.asarray(first["translation"], np.float64)) / span
+
+
+def annotation_points(ann: dict) -> int:
+    """The devkit's num_pts: lidar + radar points in the box (load_gt); -1 (unknown, kept) unless the
+    table gives both counts, since a box with 0 radar points may still hold lidar points."""
+    if "num_lidar_pts" in ann and "num_radar_pts" in ann:
+        return ann["num_lidar_pts"] + ann["num_radar_pts"]
+    return -1
 
 
 def _boxes(tables: NuScenesTables, sample_token: str, ego_from_global: np.ndarray,
@@ -332,15 +272,16 @@ def _boxes(tables: NuScenesTables, sample_token: str, ego_from_global: np.ndarra
         rot = ego_from_global[:3, :3] @ quaternion_to_matrix(ann["rotation"])
         centre = ego_from_global[:3, :3] @ np.asarray(ann["translation"], np.float64) + ego_from_global[:3, 3]
         vel = ego_from_global[:3, :3] @ annotation_velocity(tables, ann)
-        rows.append((centre, ann["size"], matrix_yaw(rot), vel[:2], name))
+        rows.append((centre, ann["size"], matrix_yaw(rot), vel[:2], name, annotation_points(ann)))
     if not rows:
         return Boxes.empty(), {"dropped_annotations": unmapped, "velocity_known": np.zeros(0, bool)}
-    centre, size, yaw, vel, names = zip(*rows)
+    centre, size, yaw, vel, names, num_pts = zip(*rows)
     vel = np.array(vel, np.float64)
     known = np.all(np.isfinite(vel), axis=1)
     f32 = np.float32
     boxes = Boxes(np.array(centre, f32), np.array(size, f32), np.array(yaw, f32),
-                  np.where(known[:, None], vel, 0.0).astype(f32), np.array(names, dtype="<U32"))
+                  np.where(known[:, None], vel, 0.0).astype(f32), np.array(names, dtype="<U32"),
+                  np.array(num_pts, np.int64))
     return boxes, {"dropped_annotations": unmapped, "velocity_known": known}
 
 
@@ -356,12 +297,17 @@ def read_nuscenes_frame(tables, sample_token: str, nsweeps: int = 1, channels: S
     dt = reference time - sweep time in seconds. Boxes keep the devkit detection names (car, truck,
     bus, trailer, construction_vehicle, pedestrian, motorcycle, bicycle, traffic_cone, barrier),
     optionally restricted to `classes`; velocities unknown to the devkit are zeros (meta velocity_known).
+    boxes.num_pts is the devkit's num_lidar_pts + num_radar_pts (-1 where the table lacks them): the
+    metric drops ground truth with 0, as the devkit's filter_eval_boxes does.
+
+    A corrupt or mistyped table raises ValueError naming the table file, record and field; a
+    sample_data file that is missing raises FileNotFoundError naming its record.
     """
     if not isinstance(tables, NuScenesTables):
         tables = NuScenesTables(tables)
     tables.get("sample", sample_token)
     ref_sd, ref_name = _reference(tables, sample_token, ref_channel, channels)
-    ref_pose = tables.get("ego_pose", ref_sd["ego_pose_token"])
+    ref_pose = tables.follow("sample_data", ref_sd, "ego_pose_token", "ego_pose")
     ref_from_global = pose_matrix(ref_pose["translation"], ref_pose["rotation"], inverse=True)
     filters = dict(invalid_states=invalid_states, dynprop_states=dynprop_states, ambig_states=ambig_states)
     chunks, dropped, per_channel = [], 0, {}
@@ -386,10 +332,11 @@ def _reference(tables: NuScenesTables, sample_token: str, ref_channel: str,
         sd = tables.key_frame(sample_token, name)
         if sd is not None:
             return sd, name
-    raise ValueError(f"sample {sample_token!r} has no key-frame sample_data for {ref_channel} or {tuple(channels)}")
+    raise ValueError(f"{tables.path('sample_data')}: sample {sample_token!r} has no key-frame record for "
+                     f"{ref_channel} or {tuple(channels)}")
 
 
 __all__ = ["RADAR_FIELDS", "RADAR_CHANNELS", "NUSCENES_FEATURES", "DETECTION_MAPPING", "read_radar_pcd",
            "write_radar_pcd", "drop_nonfinite", "filter_radar_points", "radar_features", "quaternion_to_matrix",
            "matrix_yaw", "pose_matrix", "NuScenesTables", "list_samples", "annotation_velocity",
-           "read_nuscenes_frame"]
+           "annotation_points", "read_nuscenes_frame"]

@@ -8,7 +8,8 @@ Real sources are split deterministically by frame order (first 70 % train, next 
 Point columns (`features=`): "dsfec" (default) maps every source onto DSFEC_FEATURES, the
 nuScenes columns the DSFEC models read; "native" keeps a source's own columns (VoD: VOD_FEATURES,
 TJ4D: TJ4D_FEATURES), what RadarNeXt reads. `synthetic4d` gives native VoD columns, or DSFEC's
-with features="dsfec" (mapped as VoD's are). Either way box classes go through CLASS_MAP; others are dropped.
+with features="dsfec" (mapped as VoD's are). Either way box classes go through the source's class map
+(`class_map`: KITTI_CLASS_MAP for VoD/TJ4D, CLASS_MAP otherwise); others are dropped.
 """
 
 from __future__ import annotations
@@ -22,8 +23,14 @@ import numpy as np
 from .frame import Frame
 
 DSFEC_FEATURES = ("x", "y", "z", "rcs", "vx_comp", "vy_comp", "dt")
-# Dataset class names -> the DSFEC heads' names (VoD/TJ4D call a bicycle with rider 'cyclist').
-CLASS_MAP = {"cyclist": "bicycle", "bicycle": "bicycle", "car": "car", "truck": "truck", "pedestrian": "pedestrian"}
+# Dataset class names -> the heads' names. The canonical VRU name "bicycle" is a bicycle with its rider, as
+# the synthetic benchmarks and nuScenes name it (CLASS_MAP keeps their names). VoD and TJ4D call that
+# 'cyclist' (KITTI_CLASS_MAP); VoD's own 'bicycle' is one WITHOUT a rider (parked or pushed), which VoD's
+# evaluation scores as no class at all (kitti_official_evaluate.clean_data: neither ground truth nor a
+# neighbour of Cyclist, like 'rider' and 'bicycle_rack'), so it is dropped with them.
+CLASS_MAP = {"bicycle": "bicycle", "car": "car", "truck": "truck", "pedestrian": "pedestrian"}
+KITTI_CLASS_MAP = {"cyclist": "bicycle", "car": "car", "truck": "truck", "pedestrian": "pedestrian"}
+SOURCE_CLASS_MAPS = {"vod": KITTI_CLASS_MAP, "tj4d": KITTI_CLASS_MAP}  # Frame.source -> its map
 SPLIT_FRACTIONS = {"train": (0.0, 0.7), "val": (0.7, 0.85), "test": (0.85, 1.0), "all": (0.0, 1.0)}
 FEATURE_SETS = ("dsfec", "native")
 SOURCE_KINDS = ("synthetic", "synthetic4d", "vod:PATH", "tj4d:PATH", "nuscenes:DATAROOT")
@@ -57,12 +64,22 @@ def to_dsfec_frame(frame: Frame) -> Frame:
     return dataclasses.replace(canonical_classes(frame), points=points, point_features=DSFEC_FEATURES)
 
 
+def class_map(source: str) -> dict[str, str]:
+    """A source's class names -> the canonical ones (Frame.source: 'vod', 'tj4d', 'synthetic', ...)."""
+    return SOURCE_CLASS_MAPS.get(source, CLASS_MAP)
+
+
 def canonical_classes(frame: Frame) -> Frame:
-    """The frame with its boxes renamed through CLASS_MAP and the others dropped; points untouched."""
-    keep = np.isin(frame.boxes.names, list(CLASS_MAP))
+    """The frame with its boxes renamed through its source's class map and the others dropped; points
+    untouched. KITTI label rows in meta (their 2D boxes feed VoD's 40 px rule) stay aligned with the boxes."""
+    mapping = class_map(frame.source)
+    keep = np.isin(frame.boxes.names, list(mapping))
     boxes = frame.boxes.select(keep)
-    boxes = dataclasses.replace(boxes, names=np.array([CLASS_MAP[n] for n in boxes.names], dtype="<U16"))
-    return dataclasses.replace(frame, boxes=boxes)
+    boxes = dataclasses.replace(boxes, names=np.array([mapping[n] for n in boxes.names], dtype="<U16"))
+    meta = frame.meta
+    if "kitti_labels" in meta:
+        meta = {**meta, "kitti_labels": meta["kitti_labels"].select(keep)}
+    return dataclasses.replace(frame, boxes=boxes, meta=meta)
 
 
 MAPPERS = {"dsfec": to_dsfec_frame, "native": canonical_classes}  # features= -> per-frame mapping
@@ -88,12 +105,32 @@ def split_ids(ids: list[str], split: str) -> list[str]:
     return ids[round(lo * len(ids)) : round(hi * len(ids))]
 
 
+SYNTHETIC_FRAMES = 200  # frames a synthetic split generates when `frames` is None
+
+
+class NoFrames(ValueError):
+    """A source, split or count that yields no frames: an error, since any score of nothing is made up."""
+
+
+def _take(ids: list[str], data: str, split: str, frames: int | None) -> list[str]:
+    """The first `frames` ids of `split` (all of them for None); NoFrames when the split is empty."""
+    chosen = split_ids(ids, split)[:frames]
+    if not chosen:
+        lo, hi = SPLIT_FRACTIONS[split]
+        raise NoFrames(f"--data {data}: split {split!r} is empty: the source has {len(ids)} frames and the "
+                       f"split takes {lo:.0%} to {hi:.0%} of them (try --split all)")
+    return chosen
+
+
 def load_frames(data: str, split: str, frames: int | None = None, seed: int = 0, difficulty: str = "normal",
                 features: str = "dsfec"):
-    """The frames of a source and split (synthetic: `frames` generated frames of that split),
-    with `features` point columns (see the module docstring)."""
+    """The frames of a source and split (synthetic: `frames` generated frames of that split, default
+    SYNTHETIC_FRAMES; real sources: the first `frames` of the split, default all), with `features`
+    point columns (see the module docstring). NoFrames for frames < 1 or an empty split."""
     if features not in FEATURE_SETS:
         raise ValueError(f"features={features!r}; expected one of {FEATURE_SETS}")
+    if frames is not None and frames < 1:
+        raise NoFrames(f"frames={frames}: expected a positive number of frames (or None for the source's default)")
     kind, _, path = data.partition(":")
     if kind in ("synthetic", "synthetic4d"):
         dataset = _synthetic(kind, split, frames, seed, difficulty)
@@ -107,11 +144,11 @@ def load_frames(data: str, split: str, frames: int | None = None, seed: int = 0,
     if kind in ("vod", "tj4d"):
         from .kitti import list_frames, read_tj4d_frame, read_vod_frame
         reader = read_vod_frame if kind == "vod" else read_tj4d_frame
-        ids = split_ids(list_frames(path), split)[: frames or None]
+        ids = _take(list_frames(path), data, split, frames)
         return MappedFrames([reader(path, i) for i in ids], mapper)
     from .nuscenes import NuScenesTables, list_samples, read_nuscenes_frame
     tables = NuScenesTables(path)
-    tokens = split_ids(list_samples(tables), split)[: frames or None]
+    tokens = _take(list_samples(tables), data, split, frames)
     return MappedFrames([read_nuscenes_frame(tables, t, nsweeps=6) for t in tokens], mapper)
 
 
@@ -122,4 +159,4 @@ def _synthetic(kind: str, split: str, frames: int | None, seed: int, difficulty:
     if split not in SPLITS:
         raise ValueError(f"{kind} data has splits {SPLITS}, not {split!r}")
     cfg = SyntheticConfig(difficulty=difficulty) if kind == "synthetic" else radar4d_config(difficulty)
-    return SyntheticDataset(cfg, split, seed, frames or 200)
+    return SyntheticDataset(cfg, split, seed, SYNTHETIC_FRAMES if frames is None else frames)

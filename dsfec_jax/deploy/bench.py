@@ -3,8 +3,9 @@
 Stages: pillarize (host numpy), network (pillar net .. heads), decode (sigmoid, PIXOR decode,
 top-k per head), nms (host, rotated, per class). Every runtime runs the same chain of four
 calls on the same frame; within each repeat the models and runtimes alternate (A B C A B C ...)
-so their ratios hold on a noisy shared machine. XLA fixes its thread pool when it starts, so
-each --threads value runs in its own worker process (ONNX Runtime gets the same count).
+so their ratios hold on a noisy shared machine. XLA has no thread-count flag and sizes its pool
+from the CPUs it may use when it starts, so each --threads value N runs in its own worker process
+pinned to N CPUs before XLA starts (profile/threads.py); ONNX Runtime gets intra_op_num_threads=N.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from ..profile.environment import xla_thread_flags
+from ..profile import threads as thread_control
 
 RUNTIMES = ("jax", "onnx", "onnx-int8")
 STAGES = ("pillarize", "network", "decode", "nms")
@@ -163,7 +164,7 @@ def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, w
     """One process, one thread count: every (model, runtime) chain timed in one interleaved loop."""
     from ..data.pillarize import PillarSpec
     from ..data.sources import load_frames
-    from ..profile.environment import cpu_model, versions
+    from ..profile.environment import cpu_model, versions, xla_threads
 
     calib = None
     chains, extra = {}, {}
@@ -186,7 +187,9 @@ def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, w
             if "jax" in runtimes:
                 extra[(name, "jax")]["throughput_fps"] = jax_throughput(det, variables, predictor, repeats)
         samples = time_chains(chains, repeats, warmup)
-    env = {"cpu": cpu_model(), "threads": threads, "versions": versions(
+    # threads: the count asked for; xla_threads: XLA's pool as observed after the runs (the truth)
+    env = {"cpu": cpu_model(), "threads": threads, "xla_threads": xla_threads(),
+           "cpu_affinity": thread_control.available_cpus(), "versions": versions(
         ("jax", "jaxlib", "flax", "numpy", "onnxruntime", "jax2onnx", "dsfec_jax"))}
     records = []
     for (name, rt), s in samples.items():
@@ -200,7 +203,10 @@ def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, w
 
 
 def run(models: list[str], runtimes: list[str], threads: list[int], repeats: int = 20, warmup: int = 3) -> list[dict]:
-    """Each thread count in a worker process (XLA's pool is fixed at start-up) -> all records."""
+    """Each thread count in a worker process pinned to that many CPUs (XLA's pool is fixed at
+    start-up) -> all records."""
+    for t in threads:  # refuse a count the machine cannot give before any worker starts
+        thread_control.check(t)
     records = []
     for t in threads:
         with tempfile.TemporaryDirectory() as tmp:
@@ -208,7 +214,7 @@ def run(models: list[str], runtimes: list[str], threads: list[int], repeats: int
             cmd = [sys.executable, "-m", "dsfec_jax.deploy.bench", "--models", ",".join(models),
                    "--runtimes", ",".join(runtimes), "--threads", str(t), "--repeats", str(repeats),
                    "--warmup", str(warmup), "--records-out", str(out)]
-            env = {**os.environ, "XLA_FLAGS": xla_thread_flags(t), "OMP_NUM_THREADS": str(t)}
+            env = {**os.environ, "OMP_NUM_THREADS": str(t)}
             proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
             if proc.returncode != 0:
                 raise RuntimeError(f"bench worker (threads={t}) failed:\n{proc.stderr[-3000:]}")
@@ -281,6 +287,7 @@ def main(argv=None) -> int:  # the worker entry point; users run `dsfec bench`
     p.add_argument("--warmup", type=int, default=3)
     p.add_argument("--records-out", required=True)
     a = p.parse_args(argv)
+    thread_control.pin(a.threads)  # before the first jax computation: XLA sizes its pool from it
     records = worker(a.models.split(","), a.runtimes.split(","), a.threads, a.repeats, a.warmup)
     Path(a.records_out).write_text(json.dumps(records))
     return 0

@@ -19,23 +19,41 @@ from pathlib import Path
 import jax
 
 from .. import atomic
+from ..models.center_head import BOX_OUTPUTS
 from ..models.dsfec import HEAD_NAMES
 from ..predict import decoder, head_classes
 from ..profile.environment import versions
 
 INPUTS = ("points", "mask", "coords")
 OUTPUTS = ("boxes", "scores", "labels")
-MAP_OUTPUTS = tuple(f"{h}_{k}" for h in HEAD_NAMES for k in ("cls", "box"))
+MAP_OUTPUTS = tuple(f"{h}_{k}" for h in HEAD_NAMES for k in ("cls", "box"))  # DSFEC's head maps
+CENTER_MAP_OUTPUTS = tuple(f"center_{k}" for k, _ in BOX_OUTPUTS) + ("center_hm",)  # a CenterHead's (deployed)
+
+
+def map_outputs(cfg) -> tuple[str, ...]:
+    """Names of the head maps `with_maps` adds to the outputs (what parity tests compare)."""
+    names = {"dsfec": MAP_OUTPUTS, "radarnext": CENTER_MAP_OUTPUTS}
+    if cfg.family not in names:
+        raise ValueError(f"{cfg.name}: with_maps knows the head maps of families {sorted(names)}, not {cfg.family!r}")
+    return names[cfg.family]
+
+
+def head_maps(cfg, maps: dict) -> tuple:
+    """The network's outputs in `map_outputs(cfg)` order (a training-only corner map is left out)."""
+    names = map_outputs(cfg)
+    if cfg.family == "radarnext":
+        return tuple(maps[name.removeprefix("center_")] for name in names)
+    return tuple(maps[h][k] for h in HEAD_NAMES for k in ("cls", "box"))
 
 
 def end_to_end(detector, variables, top_k: int = 100, with_maps: bool = False):
-    """fn(points, mask, coords) -> (boxes, scores, labels[, DSFEC head maps...]), weights baked in."""
+    """fn(points, mask, coords) -> (boxes, scores, labels[, head maps...]), weights baked in."""
     decode = decoder(detector.config, top_k)
 
     def fn(points, mask, coords):
         maps = detector.apply(variables, {"points": points, "mask": mask, "coords": coords})
         out = decode(maps)
-        return out + tuple(maps[h][k] for h in HEAD_NAMES for k in ("cls", "box")) if with_maps else out
+        return out + head_maps(detector.config, maps) if with_maps else out
 
     return fn
 
@@ -62,13 +80,11 @@ def export(detector, variables, out_dir: str | Path, top_k: int = 100, batch_siz
     from .. import zoo
 
     out_dir = Path(out_dir)
-    if with_maps and detector.config.family != "dsfec":
-        raise ValueError(f"{detector.name}: with_maps exports DSFEC's head maps; a {detector.config.family} model has none")
     detector, variables = zoo.deploy(detector, variables)  # fused form (unchanged for DSFEC)
     det = grouped(detector)
+    outputs = OUTPUTS + (map_outputs(det.config) if with_maps else ())  # an unknown family fails here
     fn = end_to_end(det, variables, top_k, with_maps)
     specs = [jax.ShapeDtypeStruct(v.shape, v.dtype) for v in (det.dummy_inputs(batch_size)[k] for k in INPUTS)]
-    outputs = OUTPUTS + (MAP_OUTPUTS if with_maps else ())
     model = onnx_model(fn, specs, INPUTS, outputs, det.name)
     atomic.write_bytes(out_dir / "model.onnx", model.SerializeToString())
     exported = jax.export.export(jax.jit(fn))(*specs)

@@ -7,16 +7,22 @@
   threshold, the highest overlap. 41 score thresholds are sampled from the true-positive scores
   at recall steps of 1/40; precision is made monotone (max over higher recalls) and AP averages
   the precisions at sample points 0, 4, ..., 40 (11 recall points), in percent.
-- Neighbouring classes (a Van for Car, a Person_sitting for Pedestrian) and boxes outside the
-  evaluated region are *ignored*: they are neither missed nor false positives when matched.
-- Regions: the entire annotated area, or the driving corridor (VoD's roi: camera |x| <= 4 m and
-  z <= 25 m), applied here in the radar frame as |y| <= 4 m and x <= 25 m, i.e. ignoring the
-  sensors' ~0.1 m lateral offset.
-- VoD also ignores boxes whose 2D image box is at most 40 px tall; that needs a camera, so it is
-  applied only when frames carry `bbox_height` (pixels) for their boxes.
+- Ignored boxes are neither missed nor false positives when matched (VoD's clean_data):
+  ground truth of a neighbouring class (a Van for Car, a Person_sitting for Pedestrian), or of
+  the class but outside the region or at most 40 px tall in the image; detections of ANY class
+  that are outside the region or under 40 px tall. Any other class is not scored at all.
+- Regions: the entire annotated area, or the driving corridor (VoD's roi): camera-frame
+  |x| <= 4 m and z <= 25 m, tested on the box's bottom centre (KITTI's label location). Boxes
+  are in the sensor (radar) frame, so the corridor needs each frame's `cam_from_sensor`.
+- The 40 px rule needs a camera: a frame's `bbox_height` (pixels, e.g. the labels' 2D boxes)
+  or, without it, `P2` and `image_size`, with which the 3D boxes are projected and the image
+  box clipped to the image, as a detector's KITTI writer does for its detections.
 
-Frames are dicts: names (N,), boxes (N, 7) as (x, y, z centre, w, l, h, yaw), detections also
-scores (N,). Facts from ../shared/docs/reference-spec.md §1; the code is ours.
+Frames are dicts: names (N,), boxes (N, 7) as (x, y, z centre, w, l, h, yaw) in the sensor frame,
+detections also scores (N,); optional: cam_from_sensor (4, 4) sensor -> rectified camera,
+bbox_height (N,), P2 (3, 4) and image_size (width, height). Facts from
+../shared/docs/reference-spec.md §1 and tudelft-iv/view-of-delft-dataset
+vod/evaluation/kitti_official_evaluate.py; the code is ours.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from dsfec_jax.boxes.geometry import bev_corners
 from dsfec_jax.boxes.rotated_iou import iou_3d
 
 N_SAMPLE_PTS = 41
@@ -32,7 +39,7 @@ VOD_IOU = {"Car": 0.5, "Pedestrian": 0.25, "Cyclist": 0.25}
 TJ4D_IOU = {"Car": 0.5, "Pedestrian": 0.25, "Cyclist": 0.25, "Truck": 0.5}
 NEIGHBOURS = {"car": ("van",), "pedestrian": ("person_sitting",)}
 MIN_HEIGHT_PX = 40.0
-CORRIDOR = {"max_abs_y": 4.0, "max_x": 25.0}
+CORRIDOR = {"max_abs_x": 4.0, "max_z": 25.0}  # camera frame (x right, z forward), metres
 REGIONS = ("entire", "corridor")
 VALID, IGNORED, OTHER = 0, 1, -1
 NO_DETECTION = -1e7
@@ -53,17 +60,70 @@ def _frame_arrays(frame: Mapping, is_det: bool, where: str) -> tuple[np.ndarray,
     return names, boxes, scores
 
 
-def _ignore_masks(boxes: np.ndarray, frame: Mapping, region: str, detection: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(outside the region, too small in the image): the two reasons the protocol ignores a box.
-    Image heights are known only when the frame carries `bbox_height` (pixels)."""
+def camera_locations(boxes: np.ndarray, cam_from_sensor: np.ndarray) -> np.ndarray:
+    """(N, 3) bottom centres in the camera frame: KITTI's label `location`, where VoD tests its corridor.
+    Boxes are upright in the (z-up) sensor frame, so the bottom centre is z - h/2 there."""
+    bottom = boxes[:, :3].copy()
+    bottom[:, 2] -= boxes[:, 5] / 2
+    return bottom @ cam_from_sensor[:3, :3].T + cam_from_sensor[:3, 3]
+
+
+def box_corners(boxes: np.ndarray) -> np.ndarray:
+    """(N, 8, 3) corners of (x, y, z centre, w, l, h, yaw) boxes: the BEV corners at bottom and top."""
+    bev = bev_corners(boxes[:, :2], boxes[:, 3:5], boxes[:, 6])
+    z = boxes[:, 2:3] + np.array([-0.5, 0.5]) * boxes[:, 5:6]  # (N, 2) bottom, top
+    return np.concatenate([np.dstack([bev, np.repeat(z[:, i : i + 1], 4, 1)]) for i in range(2)], 1)
+
+
+def projected_heights(boxes: np.ndarray, cam_from_sensor: np.ndarray, P2: np.ndarray, image_size) -> np.ndarray:
+    """(N,) pixel heights of the boxes' image boxes: the 8 corners projected with P2, the box clipped
+    to the image (0..height), as KITTI writers make a 3D detection's 2D box. Depths are floored at
+    0.1 m: a corner at or behind the camera plane has no meaningful projection."""
+    cam = box_corners(boxes) @ cam_from_sensor[:3, :3].T + cam_from_sensor[:3, 3]
+    uvw = cam @ P2[:, :3].T + P2[:, 3]
+    v = uvw[..., 1] / np.maximum(uvw[..., 2], 0.1)
+    height = float(image_size[1])
+    return np.clip(v.max(1), 0, height) - np.clip(v.min(1), 0, height)
+
+
+def _matrix(frame: Mapping, key: str, shape: tuple, where: str) -> np.ndarray:
+    value = np.asarray(frame[key], np.float64)
+    if value.shape != shape or not np.all(np.isfinite(value)):
+        raise ValueError(f"{where}: {key!r} has shape {value.shape}; expected finite {shape}")
+    return value
+
+
+def _ignore_masks(boxes: np.ndarray, frame: Mapping, region: str, detection: bool,
+                  where: str) -> tuple[np.ndarray, np.ndarray]:
+    """(outside the region, too small in the image): the two reasons the protocol ignores a box."""
     outside = np.zeros(len(boxes), bool)
     if region == "corridor":
-        outside = (np.abs(boxes[:, 1]) > CORRIDOR["max_abs_y"]) | (boxes[:, 0] > CORRIDOR["max_x"])
-    small = np.zeros(len(boxes), bool)
+        if "cam_from_sensor" not in frame:
+            raise ValueError(f"{where}: the corridor is defined in the camera frame; the frame needs "
+                             f"'cam_from_sensor' (4x4 sensor -> camera)")
+        loc = camera_locations(boxes, _matrix(frame, "cam_from_sensor", (4, 4), where))
+        outside = (np.abs(loc[:, 0]) > CORRIDOR["max_abs_x"]) | (loc[:, 2] > CORRIDOR["max_z"])
+    h = _heights(boxes, frame, where)
+    small = np.zeros(len(boxes), bool) if h is None else (h < MIN_HEIGHT_PX) if detection else (h <= MIN_HEIGHT_PX)
+    return outside, small
+
+
+def _heights(boxes: np.ndarray, frame: Mapping, where: str) -> np.ndarray | None:
+    """Image heights (pixels): given (`bbox_height`), projected (`P2`, `image_size`), or None (no camera)."""
     if "bbox_height" in frame:
         h = np.asarray(frame["bbox_height"], np.float64).reshape(-1)
-        small = (h < MIN_HEIGHT_PX) if detection else (h <= MIN_HEIGHT_PX)
-    return outside, small
+        if len(h) != len(boxes):
+            raise ValueError(f"{where}: {len(h)} bbox_height values for {len(boxes)} boxes")
+        return h
+    if "P2" not in frame:
+        return None
+    if "cam_from_sensor" not in frame or "image_size" not in frame:
+        raise ValueError(f"{where}: projecting boxes with 'P2' also needs 'cam_from_sensor' and 'image_size'")
+    size = np.asarray(frame["image_size"], np.float64).reshape(-1)
+    if size.shape != (2,) or not np.all(size > 0):
+        raise ValueError(f"{where}: image_size={frame['image_size']!r}; expected (width, height) > 0")
+    return projected_heights(boxes, _matrix(frame, "cam_from_sensor", (4, 4), where),
+                             _matrix(frame, "P2", (3, 4), where), size)
 
 
 def gt_flags(names, outside, small, cls: str) -> np.ndarray:
@@ -77,11 +137,10 @@ def gt_flags(names, outside, small, cls: str) -> np.ndarray:
 
 
 def det_flags(names, outside, small, cls: str) -> np.ndarray:
-    """As KITTI's clean_data: a detection too small in the image is IGNORED whatever its class."""
-    same = names == cls.lower()
-    flags = np.full(len(names), OTHER)
-    flags[same & ~outside] = VALID
-    flags[(same & outside) | small] = IGNORED
+    """As VoD's clean_data: a detection outside the region or too small in the image is IGNORED
+    whatever its class (it may absorb a ground truth's match, never a false positive)."""
+    flags = np.where(names == cls.lower(), VALID, OTHER)
+    flags[outside | small] = IGNORED
     return flags
 
 
@@ -173,13 +232,15 @@ def evaluate(gts: Sequence[Mapping], dets: Sequence[Mapping], iou_thresholds: Ma
         raise ValueError(f"region={region!r}; expected one of {REGIONS}")
     if len(gts) != len(dets):
         raise ValueError(f"{len(gts)} ground-truth frames but {len(dets)} detection frames; expected one each")
+    if not len(gts):
+        raise ValueError("no frames to score: an AP over zero frames is undefined")
     prepared = []
     for f, (gt, det) in enumerate(zip(gts, dets)):
         g_names, g_boxes, _ = _frame_arrays(gt, False, f"ground truth frame {f}")
         d_names, d_boxes, d_scores = _frame_arrays(det, True, f"detections frame {f}")
         overlaps = iou_3d(d_boxes, g_boxes) if len(d_boxes) and len(g_boxes) else np.zeros((len(d_boxes), len(g_boxes)))
-        prepared.append((g_names, _ignore_masks(g_boxes, gt, region, False), d_names,
-                         _ignore_masks(d_boxes, det, region, True), d_scores, overlaps))
+        prepared.append((g_names, _ignore_masks(g_boxes, gt, region, False, f"ground truth frame {f}"), d_names,
+                         _ignore_masks(d_boxes, det, region, True, f"detections frame {f}"), d_scores, overlaps))
     per_class = {}
     for cls, thr in iou_thresholds.items():
         frames = [(ov, gt_flags(gn, *gm, cls), det_flags(dn, *dm, cls), ds) for gn, gm, dn, dm, ds, ov in prepared]

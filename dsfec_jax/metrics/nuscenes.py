@@ -264,7 +264,8 @@ def filter_boxes(boxes: Mapping[str, list], class_range: Mapping[str, float] | N
     Keeps boxes strictly nearer than their class range (classes not in ``class_range`` are kept; ``None``
     turns the range filter off) and, with ``drop_empty``, drops boxes whose ``num_pts`` is 0: a GT box no
     lidar or radar point hit cannot be detected. Predictions carry ``num_pts = -1`` and so are never dropped
-    by it. For radar-only sources, ``num_pts`` may be the radar point count."""
+    by it. Sources without lidar leave ``num_pts`` at -1 rather than count radar points alone (see
+    ``dsfec_jax.evaluate.score``: a radar-only count would drop exactly the objects the radar missed)."""
     out = {}
     for tok, lst in boxes.items():
         keep = [b for b in lst if class_range is None or b["detection_name"] not in class_range
@@ -288,7 +289,10 @@ def _check_samples(gt: Mapping, pred: Mapping, max_boxes_per_sample: int | None,
 def prepare(gt: Mapping, pred: Mapping, class_range: Mapping[str, float] | None = CLASS_RANGE,
             drop_empty_gt: bool = True, max_boxes_per_sample: int | None = MAX_BOXES_PER_SAMPLE,
             same_samples: bool = True) -> tuple[dict, dict]:
-    """Both sides in the submission format, checked and filtered as `evaluate` does before matching."""
+    """Both sides in the submission format, checked and filtered as `evaluate` does before matching.
+    ValueError when the ground truth holds no sample."""
+    if not gt:  # else every AP is a silent 0: an empty split or a wrong --subset, not a bad detector
+        raise ValueError("no samples to score: the ground truth holds no sample (is the evaluation set empty?)")
     gt = filter_boxes(_as_results(gt, True), class_range, drop_empty_gt)
     pred = _as_results(pred, False)
     _check_samples(gt, pred, max_boxes_per_sample, same_samples)
@@ -315,6 +319,7 @@ def evaluate(gt: Mapping, pred: Mapping, classes: Sequence[str] = DSFEC_CLASSES,
     ``gt`` / ``pred`` map sample tokens to lists of submission-format box dicts, or to ``Boxes`` (GT) /
     ``(Boxes, scores)`` (predictions). Defaults follow the devkit: class ranges, the num_pts == 0 filter, at
     most 500 predictions per sample and identical sample sets. Values are fractions (the paper prints %).
+    Zero samples raise ValueError: there is nothing to average, and every AP would be a silent 0.
 
     Returns ``{"AP": {cls: {"0.5": ap, ...}}, "class_mAP": {cls: mean over thresholds}, "AP@4": {cls: ap},
     "mAP": mean of class_mAP, "max_recall": {cls: {th: r}}, "tp_errors": {cls: {err: value at dist_th_tp}},
@@ -360,13 +365,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--keep-empty-gt", action="store_true", help="keep GT boxes with num_pts == 0")
     p.add_argument("--subset", action="store_true", help="allow predictions for a subset of the GT samples")
     args = p.parse_args(argv)
-    gt, _ = read_submission(args.gt, is_gt=True)
-    pred, _ = read_submission(args.pred)
-    if args.subset:
-        gt = {t: gt.get(t, []) for t in pred}
-    result = evaluate(gt, pred, classes=[c for c in args.classes.split(",") if c],
-                      dist_ths=[float(t) for t in args.dist_ths.split(",")],
-                      class_range=None if args.no_range_filter else CLASS_RANGE, drop_empty_gt=not args.keep_empty_gt)
+    try:  # bad files and empty inputs end the command with their message, not a traceback
+        gt, _ = read_submission(args.gt, is_gt=True)
+        pred, _ = read_submission(args.pred)
+        if args.subset:
+            gt = {t: gt.get(t, []) for t in pred}
+        result = evaluate(gt, pred, classes=[c for c in args.classes.split(",") if c],
+                          dist_ths=[float(t) for t in args.dist_ths.split(",")],
+                          class_range=None if args.no_range_filter else CLASS_RANGE,
+                          drop_empty_gt=not args.keep_empty_gt)
+    except (ValueError, FileNotFoundError) as err:
+        sys.exit(f"{p.prog}: {err}")
     json.dump(_jsonable(result), sys.stdout, indent=2)
     sys.stdout.write("\n")
     return 0

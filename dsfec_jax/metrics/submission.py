@@ -7,6 +7,7 @@ may add ``num_pts`` and have no score); a file is ``{"meta": {...}, "results": {
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from typing import Any, Mapping, Sequence
@@ -22,6 +23,7 @@ ATTRIBUTE_NAMES = ("pedestrian.moving", "pedestrian.sitting_lying_down", "pedest
                    "cycle.with_rider", "cycle.without_rider", "vehicle.moving", "vehicle.parked", "vehicle.stopped")
 # detection_cvpr_2019: evaluation range per class, metres from the ego in the ground plane.
 MAX_BOXES_PER_SAMPLE = 500
+MAX_NUM_PTS = 2**31 - 1  # points in one box: any real count, and it fits the int64 arrays it becomes
 META_KEYS = ("use_camera", "use_lidar", "use_radar", "use_map", "use_external")
 
 
@@ -44,6 +46,14 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
 
 
+def _is_finite(v: Any) -> bool:
+    """A number that is a finite float; a JSON integer too large for a float is not."""
+    try:
+        return _is_number(v) and math.isfinite(float(v))
+    except OverflowError:
+        return False
+
+
 def _vector(entry: Mapping, field: str, n: int, fail, finite: bool = True) -> list[float]:
     v = entry.get(field)
     v = v.tolist() if isinstance(v, np.ndarray) else v
@@ -54,9 +64,12 @@ def _vector(entry: Mapping, field: str, n: int, fail, finite: bool = True) -> li
     # Fast path for plain JSON numbers; bools (an int subclass) and strings fall to the exact check and fail.
     if not set(map(type, v)) <= _PLAIN_NUMBERS and not all(_is_number(x) for x in v):
         fail(field, f"must be a list of {n} numbers; got {v!r}")
-    out = [float(x) for x in v]
+    try:
+        out = [float(x) for x in v]
+    except OverflowError:  # a JSON integer beyond the float range
+        fail(field, f"must be a list of {n} numbers within the float range; got {v!r:.200}")
     if finite and not all(map(math.isfinite, out)):
-        fail(field, f"must be a list of {n} finite numbers; got {v!r}")
+        fail(field, f"must be a list of {n} finite numbers; got {v!r:.200}")
     return out
 
 
@@ -81,7 +94,7 @@ def _check_entry(entry: Any, token: str, i: int, source: str, is_gt: bool, names
         fail("detection_name", f"must be one of {list(names) if names else 'non-empty strings'}; got {name!r}")
     out["detection_name"] = name
     score = entry.get("detection_score", -1.0 if is_gt else None)
-    if not _is_number(score) or not math.isfinite(score):
+    if not _is_finite(score):
         fail("detection_score", f"must be a finite number; got {score!r}")
     out["detection_score"] = float(score)
     attr = entry.get("attribute_name", "")
@@ -89,8 +102,8 @@ def _check_entry(entry: Any, token: str, i: int, source: str, is_gt: bool, names
         fail("attribute_name", f"must be '' or one of {list(ATTRIBUTE_NAMES)}; got {attr!r}")
     out["attribute_name"] = attr
     num_pts = entry.get("num_pts", -1)
-    if not isinstance(num_pts, (int, np.integer)) or isinstance(num_pts, bool):
-        fail("num_pts", f"must be an integer; got {num_pts!r}")
+    if not isinstance(num_pts, (int, np.integer)) or isinstance(num_pts, bool) or not -1 <= num_pts <= MAX_NUM_PTS:
+        fail("num_pts", f"must be an integer from -1 (unknown) to {MAX_NUM_PTS}; got {num_pts!r}")
     out["num_pts"] = int(num_pts)
     if "ego_translation" in entry:
         out["ego_translation"] = _vector(entry, "ego_translation", 3, fail)
@@ -128,10 +141,10 @@ def read_submission(path, is_gt: bool = False, max_boxes_per_sample: int | None 
     ground truth may omit ``meta``, ``detection_score`` and ``num_pts``."""
     source = str(path)
     try:
-        with open(path) as f:
+        with open(path, encoding="utf-8") as f:
             data = json.load(f)
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{source}: not valid JSON ({e})") from None
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
+        raise ValueError(f"{source}: not valid JSON ({type(e).__name__}: {e})") from None
     if not isinstance(data, Mapping) or "results" not in data:
         raise ValueError(f"{source}: field 'results' is missing")
     if "meta" not in data and not is_gt:
@@ -167,7 +180,10 @@ def write_submission(path, results: Mapping, meta: Mapping | None = None, is_gt:
 
 
 def boxes_to_entries(sample_token: str, boxes, scores=None, attribute_names=None, num_pts=None) -> list[dict]:
-    """The project's ``Boxes`` (+ scores) -> submission boxes; no scores means ground truth (score -1)."""
+    """The project's ``Boxes`` (+ scores) -> submission boxes; no scores means ground truth (score -1).
+
+    ``num_pts`` defaults to the boxes' own counts (``Boxes.num_pts``, set by the nuScenes reader), else -1."""
+    num_pts = getattr(boxes, "num_pts", None) if num_pts is None else num_pts
     entries = []
     for i in range(len(boxes)):
         entries.append({
@@ -182,13 +198,17 @@ def boxes_to_entries(sample_token: str, boxes, scores=None, attribute_names=None
 
 
 def entries_to_boxes(entries: Sequence[Mapping]):
-    """Submission boxes -> (``Boxes``, scores (M,) float32); yaw from the quaternion, unknown velocity -> 0."""
+    """Submission boxes -> (``Boxes``, scores (M,) float32); yaw from the quaternion, unknown velocity -> 0;
+    ``num_pts`` (-1 where absent) kept when any box has a count."""
     if not entries:
         return Boxes.empty(), np.zeros((0,), np.float32)
     f32 = lambda key: np.array([e[key] for e in entries], np.float32)  # noqa: E731
     boxes = Boxes(f32("translation"), f32("size"),
                   np.array([quaternion_to_yaw(e["rotation"]) for e in entries], np.float32),
                   np.nan_to_num(f32("velocity")), np.array([e["detection_name"] for e in entries]))
+    counts = np.array([e.get("num_pts", -1) for e in entries], np.int64)
+    if (counts != -1).any():
+        boxes = dataclasses.replace(boxes, num_pts=counts)
     return boxes, np.array([e.get("detection_score", -1.0) for e in entries], np.float32)
 
 

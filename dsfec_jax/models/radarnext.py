@@ -21,7 +21,7 @@ from .radarnext_necks import DCN_POSITIONS, SECONDFPN, PANeck
 
 VOD_FEATURES = ("x", "y", "z", "rcs", "v_r", "v_r_comp", "time")
 # The public config's heatmap order (Pedestrian, Cyclist, Car) in the project's canonical class
-# names: VoD's "Cyclist" (a bicycle with its rider) is "bicycle" here, as in data.sources.CLASS_MAP.
+# names: VoD's "Cyclist" (a bicycle with its rider) is "bicycle" here, as in data.sources.KITTI_CLASS_MAP.
 VOD_CLASSES = ("pedestrian", "bicycle", "car")
 # TJ4DRadSet: its own 8 columns, a 69.12 m x 69.12 m grid (432 x 432) and Truck as a fourth class
 TJ4D_FEATURES = ("x", "y", "z", "v_r", "range", "power", "alpha", "beta")

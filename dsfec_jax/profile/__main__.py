@@ -1,14 +1,13 @@
 """python -m dsfec_jax.profile --models baseline,dsfec_l,dsfec_m,dsfec_s [--json] [--paper]
 
 Prints one record per model (params, GFLOPs per stage with XLA's count beside it, memory,
-jitted batch-1 latency per stage). --threads must be handled before jax is imported.
+jitted batch-1 latency per stage). --threads must be handled before XLA starts (first jax computation).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import shlex
 import sys
 
@@ -21,18 +20,22 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--no-latency", action="store_true", help="sizes only (no timing loop)")
     p.add_argument("--repeats", type=int, default=20)
     p.add_argument("--warmup", type=int, default=3)
-    p.add_argument("--threads", type=int, default=None, help="XLA CPU intra-op threads (1 = single thread)")
+    p.add_argument("--threads", type=int, default=None, help="CPU threads for XLA (the process is pinned to this many CPUs)")
     p.add_argument("--out", default=None, help="also write {command, records} JSON here (atomically)")
     p.add_argument("--readme", default=None, help="regenerate the zoo table in this README from the records")
     return p.parse_args(argv)
 
 
 def set_threads(threads: int | None) -> None:
+    """Pin the process to `threads` CPUs before XLA starts (it sizes its pool then; threads.py)."""
     if threads is None:
         return
-    from .environment import xla_thread_flags  # no jax import: safe before jax starts
+    from .threads import pin  # no jax import: safe before jax starts
 
-    os.environ["XLA_FLAGS"] = xla_thread_flags(threads)
+    try:
+        pin(threads)
+    except (ValueError, RuntimeError) as e:
+        sys.exit(str(e))
 
 
 def human(records: list[dict]) -> str:

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import os
 import platform
-import re
 from importlib import metadata
+
+from . import threads
 
 
 def cpu_model() -> str:
@@ -19,19 +20,10 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
-def xla_thread_flags(threads: int) -> str:
-    """XLA_FLAGS with the CPU backend limited to `threads` intra-op threads (read at start-up)."""
-    flag = "--xla_cpu_multi_thread_eigen=false" if threads == 1 else f"intra_op_parallelism_threads={threads}"
-    return (os.environ.get("XLA_FLAGS", "") + " " + flag).strip()
-
-
 def xla_threads() -> int:
-    """Intra-op threads XLA's CPU backend uses (1 when multi-threaded Eigen is switched off)."""
-    flags = os.environ.get("XLA_FLAGS", "")
-    if "--xla_cpu_multi_thread_eigen=false" in flags:
-        return 1
-    m = re.search(r"intra_op_parallelism_threads=(\d+)", flags)
-    return int(m.group(1)) if m else (os.cpu_count() or 1)
+    """Threads XLA's CPU backend computes on: its Eigen pool once started (observed), else the
+    CPUs the process may use, which is what XLA sizes that pool from (see threads.py)."""
+    return threads.eigen_threads() or len(threads.available_cpus())
 
 
 def versions(packages=("jax", "jaxlib", "flax", "numpy", "optax", "dsfec_jax")) -> dict:
@@ -45,4 +37,5 @@ def versions(packages=("jax", "jaxlib", "flax", "numpy", "optax", "dsfec_jax")) 
 
 
 def environment() -> dict:
-    return {"cpu": cpu_model(), "cores": os.cpu_count(), "threads": xla_threads(), "versions": versions()}
+    return {"cpu": cpu_model(), "cores": os.cpu_count(), "threads": xla_threads(),
+            "cpu_affinity": threads.available_cpus(), "versions": versions()}

@@ -32,8 +32,7 @@ def markdown(payload: dict) -> str:
         lines.append(f"| {r['model']} | {m} | {ap4} | {r['params'] / 1e6:.3f} M | {r['gflops']:.2f} | "
                      f"{r['xla_gflops']:.2f} | {r['memory_mb']:.2f} | {lat} | {r['notes']} |")
     lines.append("")
-    lines.append(f"Measured with `{payload['command']}` on {env.get('cpu', '?')}, {env.get('threads', '?')} "
-                 f"XLA threads, jax {env.get('versions', {}).get('jax', '?')}; records in "
+    lines.append(f"Measured with `{payload['command']}` on {env.get('cpu', '?')}, {_threads(env)}, jax {env.get('versions', {}).get('jax', '?')}; records in "
                  "`dsfec_jax/profile/records/zoo.json`. Car mAP / AP@4 (%, nuScenes metric) on the synthetic "
                  "test split come from the manifests of the shipped weights (`dsfec_jax/weights/*.json`, which "
                  "record the training command, seed and versions); '-' means no weights are shipped yet.")
@@ -60,6 +59,11 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     update_readme(argv[0] if argv else "README.md", json.loads(RECORDS.read_text()))
     return 0
+
+
+def _threads(env: dict) -> str:
+    n = env.get("threads", "?")
+    return f"{n} XLA thread{'' if n == 1 else 's'}"
 
 
 if __name__ == "__main__":

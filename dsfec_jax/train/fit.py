@@ -30,6 +30,14 @@ def state_variables(state: dict) -> dict:
     return {"params": state["params"], "batch_stats": state["batch_stats"]}
 
 
+def _check_counts(counts: dict) -> None:
+    """Training on, or validating with, nothing gives a number that means nothing: refuse it.
+    (`steps=None` means the schedule's length; 0 is refused, not read as None.)"""
+    bad = [f"{v} {k}" for k, v in counts.items() if v is not None and v < 1]
+    if bad:
+        raise ValueError(f"fit: {', '.join(bad)}; expected at least 1")
+
+
 def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Frame], schedule: Schedule,
         run_dir: str | Path, seed: int = 0, steps: int | None = None, window: int | None = 96,
         augment: bool = True, eval_every: int | None = 200, run_info: dict | None = None,
@@ -40,6 +48,7 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     `window_sampling`: how steps pick their training window (data.batches.BatchStream);
     `match_classes` (nuScenes protocol): the headline also carries the last validation's
     "match_tables" (evaluate.score), kept out of the logged metrics."""
+    _check_counts({"training frames": len(frames), "validation frames": len(val), "steps": steps})
     det = zoo.create(model, **overrides)
     cfg = det.config
     windows = [zoo.create(model, **{**overrides, "grid": g}) for g in training_windows(cfg.grid, window)]

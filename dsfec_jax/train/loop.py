@@ -1,16 +1,24 @@
 """The training loop: resumable run directories, JSONL metrics, last-N and best checkpoints.
 
 RUN_DIR/
-  run.json                 model config, schedule, seed, data description, versions
+  run.json                 model config, schedule, seed, data description, versions; written when
+                           the run starts and never rewritten: a resume must ask for the same setup
+                           (else RunMismatch) and is appended to its "resumes" list
   metrics.jsonl            one JSON line per logged step (and per evaluation)
   checkpoints/step_0000300.msgpack (+ .json)   the last `keep` states
   checkpoints/best.msgpack (+ .json)           the state with the best validation score
+
+A kill at any point leaves a resumable directory: checkpoints are written as one unit (see
+dsfec_jax.checkpoint; an incomplete one is skipped for the previous), a torn last metrics line is
+dropped.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import json
+import logging
 import math
 import time
 from pathlib import Path
@@ -27,8 +35,19 @@ from .schedules import Schedule, optimizer
 from .step import init_state, make_train_step
 
 
+log = logging.getLogger(__name__)
+
+# run.json fields that say how a run was launched, not what it trains: a resume may differ in them
+LAUNCH_FIELDS = ("command", "versions", "resumes")
+SHOWN_DIFFERENCES = 8  # a changed model differs in many config fields: name the first few
+
+
 class TrainingDiverged(RuntimeError):
     pass
+
+
+class RunMismatch(ValueError):
+    """The command asks a run directory for a different setup than the one it was started with."""
 
 
 @dataclasses.dataclass
@@ -49,16 +68,86 @@ def checkpoints(run_dir: Path) -> list[Path]:
     return sorted((run_dir / "checkpoints").glob("step_*.msgpack"))
 
 
+def _differences(old, new, prefix: str = "") -> list[tuple[str, object, object]]:
+    """(dotted field, old, new) for every leaf where two run.json trees differ."""
+    if not (isinstance(old, dict) and isinstance(new, dict)):
+        return [] if old == new else [(prefix, old, new)]
+    keys = list(old) + [k for k in new if k not in old]
+    absent = "<absent>"
+    return [d for k in keys for d in _differences(old.get(k, absent), new.get(k, absent), f"{prefix}{k}.")]
+
+
+def _setup(info: dict) -> dict:
+    return {k: v for k, v in info.items() if k not in LAUNCH_FIELDS}
+
+
+def _show(diffs: list, side: int) -> str:
+    shown = [f"{path[:-1]}={json.dumps(d[side])[:60]}" for path, *d in diffs[:SHOWN_DIFFERENCES]]
+    more = len(diffs) - SHOWN_DIFFERENCES
+    return ", ".join(shown) + (f" (and {more} more)" if more > 0 else "")
+
+
+def _started_with(run_dir: Path, run_info: dict) -> dict | None:
+    """The run.json of an existing run (None for a new one); RunMismatch when `run_info` asks for a
+    different setup. A run killed before its first checkpoint is checked too: run.json says what
+    the directory is for, and a new setup belongs in a new directory."""
+    path = run_dir / "run.json"
+    if not path.exists():
+        return None
+    try:
+        old = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise RunMismatch(f"{path}: not readable JSON ({err}); cannot tell which run this directory holds") from err
+    diffs = _differences(_setup(old), _setup(json.loads(json.dumps(run_info))))
+    if diffs:
+        raise RunMismatch(f"{path}: this run was started with {_show(diffs, 0)}; the command asks "
+                          f"{_show(diffs, 1)}. Use a new run directory (--run-dir) for a different setup, "
+                          f"or delete {run_dir} to start over.")
+    return old
+
+
+def _record_start(run_dir: Path, run_info: dict, previous: dict | None, step: int) -> None:
+    """A new run writes run.json; a resume keeps the original (the provenance) and appends itself
+    to its "resumes" list, with its own command line and versions."""
+    if previous is None:
+        atomic.write_json(run_dir / "run.json", run_info)
+        return
+    resume = {"from_step": step, "at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+              **{k: run_info[k] for k in LAUNCH_FIELDS if k in run_info and k != "resumes"}}
+    atomic.write_json(run_dir / "run.json", {**previous, "resumes": [*previous.get("resumes", []), resume]})
+
+
 def _restore(run_dir: Path, state: dict) -> dict:
-    last = checkpoints(run_dir)
-    return checkpoint.load(last[-1], state) if last else state
+    """The state of the newest complete checkpoint. An incomplete one (killed while saving) is
+    removed, so that it neither shadows the checkpoint that re-makes it nor counts towards `keep`."""
+    for path in reversed(checkpoints(run_dir)):
+        reason = checkpoint.problem(path)
+        if reason is None:
+            return checkpoint.load(path, state)
+        log.warning("%s; removed it and resuming from the checkpoint before it", reason)
+        path.unlink()
+        checkpoint.manifest_path(path).unlink(missing_ok=True)
+    return state
 
 
 def _trim_metrics(path: Path, step: int) -> None:
-    """Drop log lines past the resumed step, so a resumed run's log reads like one run."""
-    if path.exists():
-        lines = [l for l in path.read_text().splitlines() if l and json.loads(l).get("step", 0) <= step]
-        atomic.write_text(path, "".join(l + "\n" for l in lines))
+    """Drop log lines past the resumed step, so a resumed run's log reads like one run. A kill
+    while a line was written leaves it torn: the last line may be dropped, any other must parse."""
+    if not path.exists():
+        return
+    lines = [l for l in path.read_text().splitlines() if l.strip()]
+    kept = []
+    for i, line in enumerate(lines):
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError as err:
+            if i < len(lines) - 1:
+                raise ValueError(f"{path}: line {i + 1} is not JSON ({err}): {line[:80]!r}") from err
+            log.warning("%s: dropped its torn last line (killed while writing it): %r", path, line[:80])
+            continue
+        if row.get("step", 0) <= step:
+            kept.append(line)
+    atomic.write_text(path, "".join(l + "\n" for l in kept))
 
 
 def _save(spec: RunSpec, state: dict, step: int, extra: dict) -> None:
@@ -79,10 +168,11 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     `init_variables` (trained variables of this or a related network) seed a fresh run module by
     module (see warm_start); a resumed run ignores them."""
     spec.run_dir.mkdir(parents=True, exist_ok=True)
-    atomic.write_json(spec.run_dir / "run.json", run_info)
+    previous = _started_with(spec.run_dir, run_info)
     tx = optimizer(spec.schedule, spec.total_steps)
     state = _restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed), init_variables))
     start = int(state["step"])
+    _record_start(spec.run_dir, run_info, previous, start)
     log_path = spec.run_dir / "metrics.jsonl"
     _trim_metrics(log_path, start)
     step_fns = [make_train_step(d, tx, spec.loss) for d in (window_detectors or [detector])]
@@ -122,5 +212,13 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
 
 
 def _best_score(run_dir: Path, key: str) -> float:
-    path = checkpoint.manifest_path(run_dir / "checkpoints" / "best.msgpack")
-    return json.loads(path.read_text()).get(key, -np.inf) if path.exists() else -np.inf
+    """The recorded best score; -inf when there is none, or when the best pair is incomplete
+    (killed while saving: its manifest's score is not the weights'), so the next validation replaces it."""
+    path = run_dir / "checkpoints" / "best.msgpack"
+    if not path.exists():
+        return -np.inf
+    reason = checkpoint.problem(path)
+    if reason:
+        log.warning("%s; the next validation replaces it", reason)
+        return -np.inf
+    return checkpoint.read_manifest(path).get(key, -np.inf)

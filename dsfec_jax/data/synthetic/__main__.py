@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from ...argtypes import non_negative_int, positive_int
 from .bev_png import save_bev_png
 from .config import DIFFICULTIES, SyntheticConfig, radar4d_config
 from .dataset import SPLITS, SyntheticDataset, write_cache
@@ -20,14 +21,14 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--profile", default="nuscenes", choices=("nuscenes", "4d"),
                    help="nuscenes: the default ARS408-like sensor; 4d: the VoD-like 4D imaging radar")
     p.add_argument("--split", default="train", choices=SPLITS)
-    p.add_argument("--frames", type=int, default=500)
+    p.add_argument("--frames", type=positive_int, default=500)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--difficulty", default="normal", choices=sorted(DIFFICULTIES))
-    p.add_argument("--sweeps", type=int, default=None, help="accumulated sweeps (default: the profile's)")
+    p.add_argument("--sweeps", type=positive_int, default=None, help="accumulated sweeps (default: the profile's)")
     p.add_argument("--json", action="store_true", help="print the statistics as JSON")
-    p.add_argument("--bench", type=int, default=0, help="also time generating this many frames")
+    p.add_argument("--bench", type=non_negative_int, default=0, help="also time generating this many frames (0: no)")
     p.add_argument("--png", default=None, help="write the BEV picture of frame --png-index here")
-    p.add_argument("--png-index", type=int, default=0)
+    p.add_argument("--png-index", type=non_negative_int, default=0)
     p.add_argument("--cache", default=None, help="also write the frames to this cache directory")
     return p.parse_args(argv)
 

@@ -7,7 +7,9 @@ splits draw from disjoint streams. Nothing is stored: `SyntheticDataset` generat
 Cache format (`write_cache`): a directory of frame_000000.npz ... (one per frame, written
 atomically) and, written last, manifest.json with the format name and version, the package and
 numpy versions, the config, split, seed, count, point features and file names. A directory
-whose manifest is missing was not finished. `CachedDataset` checks the manifest before reading.
+whose manifest is missing was not finished. `CachedDataset` checks the manifest before reading:
+a corrupt or mistyped manifest or frame file raises ValueError naming the file (and field), and
+the manifest's file names must be relative paths inside the cache directory.
 Each .npz holds points (N, F) float32, point_features, box_center/size/yaw/velocity/names,
 frame_id, array-valued meta entries as `meta.<key>`, and the other meta entries as JSON in
 `meta_json`. Loading needs no pickle.
@@ -18,6 +20,9 @@ from __future__ import annotations
 import io
 import json
 import os
+import tokenize
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -26,12 +31,21 @@ from ... import __version__
 from ... import atomic
 from ...atomic import write_json
 from ..frame import Boxes, Frame
+from ..paths import inside
+from ..records import check_fields
 from .config import FORMAT_VERSION, SyntheticConfig
 from .simulate import simulate
 
 SPLITS = ("train", "val", "test")
 CACHE_FORMAT = "dsfec_jax.synthetic.frames"
 MANIFEST = "manifest.json"
+MANIFEST_FIELDS = {"format": ("str", True), "config": ("object", True), "split": ("str", True),
+                   "seed": ("count", True), "count": ("count", True), "point_features": ("str_list", True),
+                   "files": ("str_list", True)}
+# What a damaged .npz raises from zipfile / numpy.lib.format (SyntaxError, TokenError: a garbled
+# .npy header dict), besides a missing array (KeyError).
+NPZ_ERRORS = (OSError, EOFError, ValueError, KeyError, SyntaxError, tokenize.TokenError, zipfile.BadZipFile,
+              zlib.error, NotImplementedError)
 
 
 def frame_rng(seed: int, split: str, index: int) -> np.random.Generator:
@@ -118,29 +132,47 @@ class CachedDataset:
 
     def __getitem__(self, index: int) -> Frame:
         index = _check_index(index, len(self))
-        with np.load(self.directory / self.manifest["files"][index], allow_pickle=False) as z:
-            return frame_from_npz(z)
+        path = self.directory / self.manifest["files"][index]
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                return frame_from_npz(z)
+        except NPZ_ERRORS as e:
+            raise ValueError(f"{path}: not a cached frame ({type(e).__name__}: {e})") from None
 
     def __iter__(self):
         return (self[i] for i in range(len(self)))
 
 
 def read_manifest(directory: Path) -> dict:
+    """The checked manifest of a cache directory; ValueError naming manifest.json and the field."""
     path = Path(directory) / MANIFEST
     if not path.is_file():
         raise FileNotFoundError(f"{path} not found: not a synthetic cache, or its writing did not finish")
-    m = json.loads(path.read_text())
-    if m.get("format") != CACHE_FORMAT or m.get("format_version") != FORMAT_VERSION:
-        raise ValueError(f"{path}: format {m.get('format')!r} v{m.get('format_version')}; "
-                         f"this code reads {CACHE_FORMAT!r} v{FORMAT_VERSION}")
-    features = SyntheticConfig.from_dict(m["config"]).point_features
+    try:
+        m = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as e:
+        raise ValueError(f"{path}: not valid JSON ({type(e).__name__}: {e})") from None
+    if not isinstance(m, dict) or m.get("format") != CACHE_FORMAT or m.get("format_version") != FORMAT_VERSION:
+        have = (m.get("format"), m.get("format_version")) if isinstance(m, dict) else (type(m).__name__, None)
+        raise ValueError(f"{path}: format {have[0]!r} v{have[1]}; this code reads {CACHE_FORMAT!r} v{FORMAT_VERSION}")
+    check_fields(m, MANIFEST_FIELDS, str(path))
+    features = _manifest_config(path, m["config"]).point_features
+    if m["split"] not in SPLITS:
+        raise ValueError(f"{path}: field 'split' = {m['split']!r}; expected one of {SPLITS}")
     if tuple(m["point_features"]) != features or m["count"] != len(m["files"]):
         raise ValueError(f"{path}: inconsistent manifest (features {m['point_features']}, "
                          f"count {m['count']} for {len(m['files'])} files)")
-    missing = [f for f in m["files"] if not (Path(directory) / f).is_file()]
+    missing = [f for f in m["files"] if not inside(directory, f, path, "files").is_file()]
     if missing:
         raise ValueError(f"{path}: {len(missing)} frame files missing, e.g. {missing[0]}")
     return m
+
+
+def _manifest_config(path: Path, config: dict) -> SyntheticConfig:
+    try:
+        return SyntheticConfig.from_dict(config)
+    except (KeyError, TypeError, ValueError, AttributeError) as e:  # from_dict takes whatever JSON holds
+        raise ValueError(f"{path}: field 'config' is not a SyntheticConfig ({type(e).__name__}: {e})") from None
 
 
 def open_cache(directory, cfg: SyntheticConfig, split: str, seed: int, num_frames: int) -> CachedDataset:
@@ -173,7 +205,11 @@ def frame_to_npz_bytes(frame: Frame) -> bytes:
 
 
 def frame_from_npz(z) -> Frame:
-    meta = {k: tuple(v) if isinstance(v, list) else v for k, v in json.loads(str(z["meta_json"])).items()}
+    """The frame of `frame_to_npz_bytes`; ValueError (or KeyError for a missing array) when damaged."""
+    meta = json.loads(str(z["meta_json"]))
+    if not isinstance(meta, dict) or z["point_features"].ndim != 1:
+        raise ValueError("meta_json must hold a JSON object and point_features a 1-D array of names")
+    meta = {k: tuple(v) if isinstance(v, list) else v for k, v in meta.items()}
     meta.update({k[5:]: z[k] for k in z.files if k.startswith("meta.")})
     boxes = Boxes(z["box_center"], z["box_size"], z["box_yaw"], z["box_velocity"], z["box_names"])
     return Frame(z["points"], tuple(str(f) for f in z["point_features"]), boxes, str(z["frame_id"]),

@@ -1,0 +1,29 @@
+"""argparse types for counts: `--frames 0` is refused with the flag's name instead of quietly
+meaning a default (or producing a score of nothing). Used by every command line in the package."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def positive_int(text: str) -> int:
+    """A count that must be at least 1 (frames, steps, batch size, ...)."""
+    value = _int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """A count where 0 has a documented meaning (e.g. `--window 0` = the whole grid)."""
+    value = _int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {value}")
+    return value
+
+
+def _int(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
