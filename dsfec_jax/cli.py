@@ -15,8 +15,8 @@ import sys
 from pathlib import Path
 
 from .argtypes import non_negative_int, positive_int
+from .core.defaults import RUN_PILLARS
 
-RUN_PILLARS = 2048  # pillar slots at run time: radar frames fill < 1000; weights do not depend on it
 
 
 def parse_overrides(items: list[str]) -> dict:
@@ -210,7 +210,7 @@ def write_predictions(args, frames, detections, predictor) -> None:
 def run_ship(args) -> int:
     from . import checkpoint, zoo
     from .predict import predictor_for
-    from .profile.environment import versions
+    from .core.provenance import versions
     from .train.loop import checkpoints
 
     run = Path(args.run_dir)

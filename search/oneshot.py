@@ -33,7 +33,7 @@ from dsfec_jax.models.dsfec import HEAD_NAMES
 from dsfec_jax.predict import Predictor
 from dsfec_jax.profile.environment import environment
 from dsfec_jax.profile.records import profile
-from dsfec_jax.train.fit import jsonable
+from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.train.losses import LossConfig, detection_loss
 from dsfec_jax.train.schedules import optimizer
 from dsfec_jax.train.step import init_state

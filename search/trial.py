@@ -12,7 +12,8 @@ from dsfec_jax import zoo
 from dsfec_jax.data.sources import load_frames
 from dsfec_jax.profile.environment import environment
 from dsfec_jax.profile.records import profile
-from dsfec_jax.train.fit import fit, jsonable
+from dsfec_jax.core.provenance import jsonable
+from dsfec_jax.train.fit import fit
 
 from . import significance
 from .inherit import describe, initial_variables, source_weights

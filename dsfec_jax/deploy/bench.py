@@ -35,7 +35,7 @@ def model_setup(name: str):
     from ..data.sources import load_frames
     from ..predict import Predictor
 
-    from ..cli import RUN_PILLARS
+    from ..core.defaults import RUN_PILLARS
 
     det = zoo.create(name, max_pillars=RUN_PILLARS)
     shipped = zoo.shipped_weights(name)
@@ -164,7 +164,8 @@ def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, w
     """One process, one thread count: every (model, runtime) chain timed in one interleaved loop."""
     from ..data.pillarize import PillarSpec
     from ..data.sources import load_frames
-    from ..profile.environment import cpu_model, versions, xla_threads
+    from ..core.provenance import versions
+    from ..profile.environment import cpu_model, xla_threads
 
     calib = None
     chains, extra = {}, {}

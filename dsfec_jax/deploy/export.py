@@ -22,7 +22,7 @@ from .. import atomic
 from ..models.center_head import BOX_OUTPUTS
 from ..models.dsfec import HEAD_NAMES
 from ..predict import decoder, head_classes
-from ..profile.environment import versions
+from ..core.provenance import versions
 
 INPUTS = ("points", "mask", "coords")
 OUTPUTS = ("boxes", "scores", "labels")

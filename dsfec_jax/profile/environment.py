@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import os
 import platform
-from importlib import metadata
 
+from ..core.provenance import versions
 from . import threads
 
 
@@ -24,16 +24,6 @@ def xla_threads() -> int:
     """Threads XLA's CPU backend computes on: its Eigen pool once started (observed), else the
     CPUs the process may use, which is what XLA sizes that pool from (see threads.py)."""
     return threads.eigen_threads() or len(threads.available_cpus())
-
-
-def versions(packages=("jax", "jaxlib", "flax", "numpy", "optax", "dsfec_jax")) -> dict:
-    out = {"python": platform.python_version()}
-    for name in packages:
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = None
-    return out
 
 
 def environment() -> dict:

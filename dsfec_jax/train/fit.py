@@ -4,7 +4,6 @@ training entry point that `dsfec train` and search trials share."""
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 from typing import Sequence
 
@@ -17,13 +16,9 @@ from ..data.center_targets import center_head_targets
 from ..evaluate import evaluate, evaluate_vod
 from ..models.dsfec import HEAD_NAMES
 from ..predict import Predictor, predictor_for
-from ..profile.environment import versions
+from ..core.provenance import jsonable, versions
 from .loop import RunSpec, train
 from .schedules import Schedule
-
-
-def jsonable(obj):
-    return json.loads(json.dumps(obj, default=lambda o: dataclasses.asdict(o) if dataclasses.is_dataclass(o) else str(o)))
 
 
 def state_variables(state: dict) -> dict:

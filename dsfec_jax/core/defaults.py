@@ -1,0 +1,5 @@
+"""Run-time defaults shared by the command line, the predictors' callers and the benchmarks."""
+
+# Pillar slots at run time: radar frames fill fewer than 1000, and the weights do not depend on
+# the slot count (training and the paper sizes use the config's own max_pillars).
+RUN_PILLARS = 2048

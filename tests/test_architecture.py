@@ -1,0 +1,68 @@
+"""The house plan's one-way doors, read from the source: which room may import which."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "dsfec_jax"
+
+# room -> rooms of dsfec_jax it must never import (the "never" lines of the architecture)
+NEVER = {
+    "core": {"layers", "boxes", "models", "data", "metrics", "train", "profile", "deploy", "zoo", "predict",
+             "evaluate", "cli", "grid", "atomic", "checkpoint"},
+    "layers": {"boxes", "models", "data", "metrics", "train", "profile", "deploy", "zoo", "predict", "evaluate",
+               "cli"},
+    "models": {"data", "train", "deploy", "metrics", "cli"},
+    "data": {"models", "train", "cli"},
+    "metrics": {"models", "train", "cli"},
+}
+
+
+def project_imports(path: Path) -> set[str]:
+    """The dsfec_jax rooms a module imports: first component below dsfec_jax, absolute or relative."""
+    module = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            targets = [a.name.split(".") for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = list(module[: len(module) - node.level]) if node.level else []
+            target = base + (node.module.split(".") if node.module else [])
+            targets = [target + [a.name] for a in node.names] if not node.module else [target]
+        else:
+            continue
+        for t in targets:
+            if t[:1] == ["dsfec_jax"] and len(t) > 1:
+                found.add(t[1])
+            if t[:1] in (["search"], ["experiments"]):
+                found.add(t[0])
+    return found
+
+
+def modules(room: str | None = None):
+    root = PACKAGE / room if room else PACKAGE
+    return sorted(root.rglob("*.py")) if root.is_dir() else [root.with_suffix(".py")]
+
+
+@pytest.mark.parametrize("room", sorted(NEVER))
+def test_rooms_keep_their_never_rules(room):
+    bad = {str(p.relative_to(PACKAGE)): sorted(project_imports(p) & NEVER[room]) for p in modules(room)}
+    assert not {k: v for k, v in bad.items() if v}
+
+
+def test_the_library_never_imports_cli_search_or_experiments():
+    """cli.py is a thin command layer on top: only the `python -m dsfec_jax` entry point imports it."""
+    bad = {str(p.relative_to(PACKAGE)): sorted(project_imports(p) & {"cli", "search", "experiments"})
+           for p in modules() if p.name != "__main__.py" or p.parent != PACKAGE}
+    assert not {k: v for k, v in bad.items() if v}
+
+
+def test_the_reader_sees_relative_and_absolute_imports(tmp_path, monkeypatch):
+    """The checker itself can fail: a module importing cli both ways is caught."""
+    pkg = tmp_path / "dsfec_jax" / "deploy"
+    pkg.mkdir(parents=True)
+    mod = pkg / "x.py"
+    mod.write_text("from ..cli import RUN_PILLARS\nimport dsfec_jax.train.fit\nfrom .. import models\n")
+    monkeypatch.setattr(__import__(__name__), "PACKAGE", tmp_path / "dsfec_jax")
+    assert project_imports(mod) == {"cli", "train", "models"}
