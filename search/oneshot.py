@@ -28,6 +28,7 @@ from dsfec_jax import checkpoint, zoo
 from dsfec_jax.data.batches import BatchStream, collate
 from dsfec_jax.data.pillarize import PillarSpec
 from dsfec_jax.data.sources import load_frames
+from dsfec_jax.layers.conv import BN_MOMENTUM
 from dsfec_jax.evaluate import evaluate
 from dsfec_jax.models.dsfec import HEAD_NAMES
 from dsfec_jax.predict import Predictor
@@ -50,7 +51,6 @@ from .trial import COST_COLUMNS
 # calibration frames moved a candidate's Car mAP by up to 1.8 points (rms 1.2) and reordered them;
 # with 64, by at most 0.7 (rms 0.5, mostly a shift shared by every candidate) and never reordered them.
 CALIBRATION_BATCHES = 64
-BN_MOMENTUM = 0.99  # dsfec_jax.layers.conv.batch_norm
 BLOCK = re.compile(r"stage(\d)_block(\d+)$")
 
 

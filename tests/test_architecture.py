@@ -66,3 +66,16 @@ def test_the_reader_sees_relative_and_absolute_imports(tmp_path, monkeypatch):
     mod.write_text("from ..cli import RUN_PILLARS\nimport dsfec_jax.train.fit\nfrom .. import models\n")
     monkeypatch.setattr(__import__(__name__), "PACKAGE", tmp_path / "dsfec_jax")
     assert project_imports(mod) == {"cli", "train", "models"}
+
+
+def test_point_column_layouts_are_defined_once():
+    """A tuple literal of point columns (x, y, z first) lives only in core/columns.py; the
+    nuScenes PCD's 18 file fields are a file format, not a column layout."""
+    defined = {}
+    for path in modules():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Tuple) and len(node.elts) > 3 and all(
+                    isinstance(e, ast.Constant) for e in node.elts) and [e.value for e in node.elts[:3]] == ["x", "y", "z"]:
+                defined.setdefault(tuple(e.value for e in node.elts), []).append(str(path.relative_to(PACKAGE)))
+    defined = {k: v for k, v in defined.items() if "dyn_prop" not in k}
+    assert all(places == ["core/columns.py"] for places in defined.values()), defined

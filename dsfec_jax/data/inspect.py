@@ -21,7 +21,7 @@ from .nuscenes import NUSCENES_FEATURES, drop_nonfinite, radar_features, read_ra
 
 SOURCES = ("synthetic", "nuscenes-pcd", "vod", "tj4d")
 # The DSFEC pillar tensors (8000 pillars x 8 points, 7 features) as the throughput reference.
-DSFEC_SPEC = PillarSpec(DSFEC_GRID, ("x", "y", "z", "rcs", "vx_comp", "vy_comp", "dt"), 8000, 8)
+DSFEC_SPEC = PillarSpec(DSFEC_GRID, NUSCENES_FEATURES, 8000, 8)
 
 
 def frame_summary(frame: Frame) -> dict:

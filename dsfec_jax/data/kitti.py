@@ -24,10 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from dsfec_jax.boxes.geometry import box_point_counts
+from dsfec_jax.core.columns import TJ4D_FEATURES, VOD_FEATURES
 from dsfec_jax.data.frame import Boxes, Frame
 
-VOD_FEATURES = ("x", "y", "z", "rcs", "v_r", "v_r_comp", "time")
-TJ4D_FEATURES = ("x", "y", "z", "v_r", "range", "power", "alpha", "beta")
 CALIB_SHAPES = {"P2": (3, 4), "R0_rect": (3, 3), "Tr_velo_to_cam": (3, 4)}
 IGNORED_CLASSES = ("dontcare",)
 # VoD's camera image, 1936 x 1216 pixels (VoD's README; the example_set JPEGs): what its 2D boxes are clipped to.

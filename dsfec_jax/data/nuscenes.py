@@ -18,6 +18,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from dsfec_jax.core.columns import NUSCENES_FEATURES
 from dsfec_jax.data.frame import Boxes, Frame
 from dsfec_jax.data.nuscenes_tables import NuScenesTables, list_samples  # re-exported: frames are read from them
 
@@ -26,7 +27,6 @@ RADAR_FIELDS = ("x", "y", "z", "dyn_prop", "id", "rcs", "vx", "vy", "vx_comp", "
 RADAR_SIZES = (4, 4, 4, 1, 2, 4, 4, 4, 4, 4, 1, 1, 1, 1, 1, 1, 1, 1)
 RADAR_TYPES = "FFFIIFFFFFIIIIIIII"
 RADAR_CHANNELS = ("RADAR_FRONT", "RADAR_FRONT_LEFT", "RADAR_FRONT_RIGHT", "RADAR_BACK_LEFT", "RADAR_BACK_RIGHT")
-NUSCENES_FEATURES = ("x", "y", "z", "rcs", "vx_comp", "vy_comp", "dt")
 
 # nuscenes-devkit defaults (RadarPointCloud): keep valid, unambiguous points of any dynamic property.
 DEFAULT_INVALID_STATES = (0,)

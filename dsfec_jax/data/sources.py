@@ -20,9 +20,10 @@ from typing import Sequence
 
 import numpy as np
 
+from ..core.columns import NUSCENES_FEATURES
 from .frame import Frame
 
-DSFEC_FEATURES = ("x", "y", "z", "rcs", "vx_comp", "vy_comp", "dt")
+DSFEC_FEATURES = NUSCENES_FEATURES  # the columns every source maps onto for DSFEC
 # Dataset class names -> the heads' names. The canonical VRU name "bicycle" is a bicycle with its rider, as
 # the synthetic benchmarks and nuScenes name it (CLASS_MAP keeps their names). VoD and TJ4D call that
 # 'cyclist' (KITTI_CLASS_MAP); VoD's own 'bicycle' is one WITHOUT a rider (parked or pushed), which VoD's

@@ -13,12 +13,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..grid import DSFEC_GRID, Grid
+from ..core.columns import NUSCENES_FEATURES
 from ..layers import ACTIVATIONS, ConvBNAct, DSConv, PillarFeatureNet, ResidualBottleneck, check_fec_filters, scatter_to_bev
 from .heads import DenseHead
 from .necks import TopDownNeck
 from .pillar_inputs import random_pillar_inputs
 
-RADAR_FEATURES = ("x", "y", "z", "rcs", "vx_comp", "vy_comp", "dt")
+RADAR_FEATURES = NUSCENES_FEATURES
 HEAD_NAMES = ("car", "truck", "vru")
 ACT_FIELDS = ("act_fec", "act_stem", "act_backbone", "act_car_head", "act_truck_head", "act_vru_head")
 

@@ -14,17 +14,16 @@ import dataclasses
 import flax.linen as nn
 
 from ..grid import TJ4D_GRID, VOD_GRID, Grid
+from ..core.columns import TJ4D_FEATURES, VOD_FEATURES
 from ..layers import ConvBNAct, PillarFeatureNet, RepDWSeparable, reparameterize_tree, scatter_to_bev
 from .center_head import CenterHead
 from .pillar_inputs import random_pillar_inputs
 from .radarnext_necks import DCN_POSITIONS, SECONDFPN, PANeck
 
-VOD_FEATURES = ("x", "y", "z", "rcs", "v_r", "v_r_comp", "time")
 # The public config's heatmap order (Pedestrian, Cyclist, Car) in the project's canonical class
 # names: VoD's "Cyclist" (a bicycle with its rider) is "bicycle" here, as in data.sources.KITTI_CLASS_MAP.
 VOD_CLASSES = ("pedestrian", "bicycle", "car")
 # TJ4DRadSet: its own 8 columns, a 69.12 m x 69.12 m grid (432 x 432) and Truck as a fourth class
-TJ4D_FEATURES = ("x", "y", "z", "v_r", "range", "power", "alpha", "beta")
 TJ4D_CLASSES = ("pedestrian", "bicycle", "car", "truck")
 NECKS = ("fpn", "pan", "mdfen")
 BACKBONES = ("rep_dwc", "dense")

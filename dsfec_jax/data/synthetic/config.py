@@ -16,13 +16,13 @@ import dataclasses
 
 import numpy as np
 
+from ...core.columns import NUSCENES_FEATURES, VOD_FEATURES
 from ...grid import DSFEC_GRID, VOD_GRID, Grid
-from ..kitti import VOD_FEATURES
 
 CLASSES = ("car", "truck", "pedestrian", "bicycle")
 # The nuScenes radar columns the DSFEC models read (models/dsfec.py RADAR_FEATURES; data may not
 # import models, so the tuple is repeated here and a test pins the two together).
-RADAR_FEATURES = ("x", "y", "z", "rcs", "vx_comp", "vy_comp", "dt")
+RADAR_FEATURES = NUSCENES_FEATURES
 # point_format -> the point columns a frame carries. "vod": VoD's .bin layout (docs/SENSORS_AND_DATA.md),
 # v_r the Doppler relative to the moving sensor, v_r_comp ego-motion compensated, time = -k for sweep k.
 POINT_FORMATS = {"nuscenes": RADAR_FEATURES, "vod": VOD_FEATURES}
