@@ -219,13 +219,14 @@ def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, pat
     A supernet saved only in part (killed while saving) is trained again, not failed on."""
     tx = optimizer(recipe.schedule, steps)
     if path.is_file():
-        reason = checkpoint.problem(path)
-        if reason is None:
+        try:
+            state = checkpoint.load(path, init_state(supernet, tx, jax.random.key(seed)))
+        except checkpoint.CheckpointError as reason:
+            log(f"{reason}: training the supernet again")
+        else:
             manifest = checkpoint.read_manifest(path)
             log(f"supernet from {path} ({manifest['steps']} steps, trained in {manifest['wall_s']:.0f} s)")
-            state = checkpoint.load(path, init_state(supernet, tx, jax.random.key(seed)))
             return state, manifest["wall_s"], manifest["cpu_s"]
-        log(f"{reason}: training the supernet again")
     t0, c0 = time.perf_counter(), time.process_time()
     state = init_state(supernet, tx, jax.random.key(seed), init)
     step_fn = supernet_step(supernet, tx, LossConfig())

@@ -215,18 +215,10 @@ def read_cache_or_clear_error(directory, named: str):
         assert named in str(e), str(e)
 
 
-@FUZZ
-@given(key=st.sampled_from(["format", "format_version", "config", "split", "seed", "count", "point_features",
-                            "files", "grid", "difficulty"]), value=VALUES, how=st.sampled_from(["set", "delete"]))
-def test_cache_manifest_mistyped_fields_raise_valueerror(cache, key, value, how):
+def read_with_manifest(cache, manifest) -> None:
+    """read_cache_or_clear_error with `manifest` (any JSON) in place of the cache's, then put it back."""
     path = cache / "manifest.json"
     good = path.read_text()
-    manifest = json.loads(good)
-    target = manifest["config"] if key in ("grid", "difficulty") else manifest
-    if how == "set":
-        target[key] = value
-    else:
-        target.pop(key, None)
     try:
         path.write_text(json.dumps(manifest))
         read_cache_or_clear_error(cache, "manifest.json")
@@ -235,15 +227,22 @@ def test_cache_manifest_mistyped_fields_raise_valueerror(cache, key, value, how)
 
 
 @FUZZ
+@given(key=st.sampled_from(["format", "format_version", "config", "split", "seed", "count", "point_features",
+                            "files", "grid", "difficulty"]), value=VALUES, how=st.sampled_from(["set", "delete"]))
+def test_cache_manifest_mistyped_fields_raise_valueerror(cache, key, value, how):
+    manifest = json.loads((cache / "manifest.json").read_text())
+    target = manifest["config"] if key in ("grid", "difficulty") else manifest
+    if how == "set":
+        target[key] = value
+    else:
+        target.pop(key, None)
+    read_with_manifest(cache, manifest)
+
+
+@FUZZ
 @given(value=JSON)
 def test_cache_manifest_any_json_raises_valueerror(cache, value):
-    path = cache / "manifest.json"
-    good = path.read_text()
-    try:
-        path.write_text(json.dumps(value))
-        read_cache_or_clear_error(cache, "manifest.json")
-    finally:
-        path.write_text(good)
+    read_with_manifest(cache, value)
 
 
 @FUZZ

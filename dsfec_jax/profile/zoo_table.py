@@ -32,7 +32,8 @@ def markdown(payload: dict) -> str:
         lines.append(f"| {r['model']} | {m} | {ap4} | {r['params'] / 1e6:.3f} M | {r['gflops']:.2f} | "
                      f"{r['xla_gflops']:.2f} | {r['memory_mb']:.2f} | {lat} | {r['notes']} |")
     lines.append("")
-    lines.append(f"Measured with `{payload['command']}` on {env.get('cpu', '?')}, {_threads(env)}, jax {env.get('versions', {}).get('jax', '?')}; records in "
+    lines.append(f"Measured with `{payload['command']}` on {env.get('cpu', '?')}, {_threads(env)}, "
+                 f"jax {env.get('versions', {}).get('jax', '?')}; records in "
                  "`dsfec_jax/profile/records/zoo.json`. Car mAP / AP@4 (%, nuScenes metric) on the synthetic "
                  "test split come from the manifests of the shipped weights (`dsfec_jax/weights/*.json`, which "
                  "record the training command, seed and versions); '-' means no weights are shipped yet.")

@@ -121,10 +121,10 @@ def _restore(run_dir: Path, state: dict) -> dict:
     """The state of the newest complete checkpoint. An incomplete one (killed while saving) is
     removed, so that it neither shadows the checkpoint that re-makes it nor counts towards `keep`."""
     for path in reversed(checkpoints(run_dir)):
-        reason = checkpoint.problem(path)
-        if reason is None:
+        try:
             return checkpoint.load(path, state)
-        log.warning("%s; removed it and resuming from the checkpoint before it", reason)
+        except checkpoint.CheckpointError as reason:
+            log.warning("%s; removed it and resuming from the checkpoint before it", reason)
         path.unlink()
         checkpoint.manifest_path(path).unlink(missing_ok=True)
     return state
