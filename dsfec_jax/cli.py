@@ -113,7 +113,7 @@ def parse(argv=None) -> argparse.Namespace:
 
 
 def run_train(args) -> int:
-    from .data.sources import NoFrames, load_frames
+    from .data.points.sources import NoFrames, load_frames
     from .train.fit import fit
     from .train.loop import RunMismatch
     from .train.schedules import get_schedule
@@ -148,8 +148,8 @@ def run_train(args) -> int:
 
 def run_eval_or_predict(args) -> int:
     from . import zoo
-    from .data.sources import NoFrames, load_frames
-    from .evaluate import headline, predict_frames, score, score_vod
+    from .data.points.sources import NoFrames, load_frames
+    from .evaluate import predict_frames, report
 
     if args.runtime == "onnx":
         from .deploy import OrtPredictor
@@ -172,15 +172,8 @@ def run_eval_or_predict(args) -> int:
     weights = str(args.onnx if args.runtime == "onnx" else args.weights or zoo.shipped_weights(args.model))
     result = {"model": args.model, "runtime": args.runtime, "weights": weights, "data": args.data,
               "split": args.split, "seed": args.seed, "frames": len(frames)}
-    if zoo.config(args.model).family == "radarnext":  # the View-of-Delft / TJ4D 3D AP
-        result.update(protocol="vod", **score_vod(frames, detections, predictor.spec.grid, predictor.class_names))
-        summary = f"VoD 3D mAP {result['mAP']:.2f}  corridor {result['mAP_corridor']:.2f}  " + "  ".join(
-            f"{c} {ap:.2f}" for c, ap in result["AP"].items())
-    else:
-        metrics = score(frames, detections, grid=predictor.spec.grid)
-        result.update(protocol="nuscenes", **headline(metrics), metrics=metrics)
-        summary = (f"Car mAP {result['car_mAP']:.2f}  Car AP@4 {result['car_AP4']:.2f}  "
-                   f"mAP(all classes) {result['mAP']:.2f}")
+    scored, summary = report(zoo.family_of(args.model).metric.name, frames, detections, predictor)
+    result.update(scored)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -199,7 +192,7 @@ def write_predictions(args, frames, detections, predictor) -> None:
         gt = {f.frame_id: boxes_to_entries(f.frame_id, in_grid(f.boxes, grid)) for f in (frames[i] for i in range(len(frames)))}
         write_submission(args.gt_out, gt, is_gt=True)
     if args.png_dir:
-        from .data.synthetic.bev_png import save_bev_png
+        from .data.points.synthetic.bev_png import save_bev_png
         for i in range(len(frames)):
             f = frames[i]
             safe = f.frame_id.replace("/", "_") or f"frame_{i:06d}"
@@ -208,9 +201,11 @@ def write_predictions(args, frames, detections, predictor) -> None:
 
 
 def run_ship(args) -> int:
-    from . import checkpoint, zoo
-    from .predict import predictor_for
+    from . import zoo
+    from .core import checkpoint
     from .core.provenance import versions
+    from .evaluate import measure_benchmark
+    from .predict import Predictor
     from .train.loop import checkpoints
 
     run = Path(args.run_dir)
@@ -228,8 +223,9 @@ def run_ship(args) -> int:
     det = zoo.create(args.model, max_pillars=max_pillars)
     variables = zoo.load_variables(det, source)
     variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
-    predictor = predictor_for(det, variables, score_threshold=0.05)
-    measured = {split: measure_shipped(predictor, args.model, split, args.frames) for split in ("val", "test")}
+    predictor = Predictor(det, variables, score_threshold=0.05)
+    family = zoo.family_of(args.model)
+    measured = {split: measure_benchmark(predictor, family, split, args.frames) for split in ("val", "test")}
     manifest = {"model": args.model, "source_checkpoint": str(source),
                 "step": checkpoint.read_manifest(source).get("step"), "training": info,
                 "measured": measured, "ship_command": command_line(args),
@@ -238,24 +234,6 @@ def run_ship(args) -> int:
     checkpoint.save(out, variables, manifest)
     print(json.dumps({"weights": str(out), "measured": measured}, indent=2))
     return 0
-
-
-def measure_shipped(predictor, model: str, split: str, frames: int) -> dict:
-    """The headline figures a weights manifest records: on the family's synthetic benchmark
-    (data seed 0), the nuScenes-style metric for DSFEC, the VoD 3D AP for RadarNeXt."""
-    from . import zoo
-    from .data.sources import load_frames
-    from .evaluate import evaluate, predict_frames, score_vod
-
-    provenance = {"frames": frames, "data_seed": 0}
-    if zoo.config(model).family == "radarnext":
-        data = load_frames("synthetic4d", split, frames, 0, features=zoo.input_columns(model))
-        result = score_vod(data, predict_frames(predictor, data), predictor.spec.grid, predictor.class_names)
-        return {k: result[k] for k in ("mAP", "mAP_corridor", "AP", "AP_corridor")} | provenance | {
-            "data": "synthetic4d", "protocol": "vod"}
-    result = evaluate(predictor, load_frames("synthetic", split, frames, 0))
-    return {k: result[k] for k in ("car_mAP", "car_AP4", "mAP")} | {
-        "class_mAP": result["metrics"]["class_mAP"], "AP@4": result["metrics"]["AP@4"]} | provenance
 
 
 def run_export(args) -> int:
@@ -275,7 +253,7 @@ def run_export(args) -> int:
 
 
 def run_quantize(args) -> int:
-    from .data.sources import load_frames
+    from .data.points.sources import load_frames
     from .deploy.quantize import quantize
 
     out = quantize(args.onnx, args.out, load_frames("synthetic", "train", args.calib_frames, args.seed),
@@ -285,7 +263,8 @@ def run_quantize(args) -> int:
 
 
 def run_bench(args) -> int:
-    from . import atomic, zoo
+    from .core import atomic
+    from . import zoo
     from .deploy import bench
 
     models = [m for m in args.models.split(",") if m]

@@ -6,8 +6,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .data.frame import Frame
-from .data.kitti import VOD_IMAGE_SIZE, VOD_RADAR_TO_CAMERA
+from .data.points.frame import Frame
+from .data.points.kitti import VOD_IMAGE_SIZE, VOD_RADAR_TO_CAMERA
 from .metrics import kitti3d, nuscenes, resampling
 from .predict import Detections, Predictor
 
@@ -140,3 +140,61 @@ def score_vod(frames: Sequence[Frame], detections: dict, grid, class_names, iou_
     entire, corridor = both["entire"], both["corridor"]
     return {"mAP": entire["mAP"], "mAP_corridor": corridor["mAP"], "AP": entire["AP"],
             "AP_corridor": corridor["AP"], "num_gt": entire["num_gt"], "num_gt_corridor": corridor["num_gt"]}
+
+
+# --- metric protocols by name: a family's record names its protocol (models never import metrics)
+
+def _validate_nuscenes(predictor, frames, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
+    result = evaluate(predictor, frames, match_classes=match_classes)
+    m = result.pop("metrics")
+    return {**result, "class_mAP": m["class_mAP"], "AP@4": m.get("AP@4", {})}, m.get("match_tables", {})
+
+
+def _validate_vod(predictor, frames, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
+    return evaluate_vod(predictor, frames), {}
+
+
+def _report_nuscenes(frames, detections, predictor) -> tuple[dict, str]:
+    metrics = score(frames, detections, grid=predictor.spec.grid)
+    result = {"protocol": "nuscenes", **headline(metrics), "metrics": metrics}
+    return result, (f"Car mAP {result['car_mAP']:.2f}  Car AP@4 {result['car_AP4']:.2f}  "
+                    f"mAP(all classes) {result['mAP']:.2f}")
+
+
+def _report_vod(frames, detections, predictor) -> tuple[dict, str]:
+    result = {"protocol": "vod", **score_vod(frames, detections, predictor.spec.grid, predictor.class_names)}
+    return result, f"VoD 3D mAP {result['mAP']:.2f}  corridor {result['mAP_corridor']:.2f}  " + "  ".join(
+        f"{c} {ap:.2f}" for c, ap in result["AP"].items())
+
+
+# name -> (validate(predictor, frames, match_classes) -> (logged scores, match tables),
+#          report(frames, detections, predictor) -> (the eval command's fields, its one-line summary))
+PROTOCOLS = {"nuscenes": (_validate_nuscenes, _report_nuscenes), "vod": (_validate_vod, _report_vod)}
+
+
+def _protocol(name: str):
+    if name not in PROTOCOLS:
+        raise KeyError(f"unknown metric protocol {name!r}; known: {sorted(PROTOCOLS)}")
+    return PROTOCOLS[name]
+
+
+def validate(protocol: str, predictor, frames: Sequence[Frame], match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
+    """Predict and score `frames` under `protocol` -> (headline and per-class scores, match tables
+    of `match_classes` for bootstrap intervals; {} where the protocol keeps none)."""
+    return _protocol(protocol)[0](predictor, frames, match_classes)
+
+
+def report(protocol: str, frames: Sequence[Frame], detections: dict, predictor) -> tuple[dict, str]:
+    """Score given detections under `protocol` -> (result fields, a one-line summary)."""
+    return _protocol(protocol)[1](frames, detections, predictor)
+
+
+def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
+    """What a weights manifest records: the family's protocol on `frames` frames of `split` of its
+    embedded synthetic benchmark (data seed 0), the keys its protocol keeps."""
+    from .data.points.sources import load_frames
+
+    data = load_frames(family.benchmark, split, frames, 0, features=family.input_columns)
+    scores, _ = validate(family.metric.name, predictor, data)
+    return {k: scores[k] for k in family.metric.keep} | {
+        "frames": frames, "data_seed": 0, "data": family.benchmark, "protocol": family.metric.name}

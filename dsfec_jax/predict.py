@@ -8,29 +8,23 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
+from . import zoo
 from .boxes import priors
-from .boxes.center_decode import decode_center_head
-from .boxes.decode import decode_heads
 from .boxes.nms import batched_rotated_nms
-from .boxes.pixor import cell_centres
 from .boxes.structures import Boxes
-from .data.frame import Frame
-from .data.pillarize import PillarSpec, pillarize, select_columns
-from .models.dsfec import HEAD_NAMES
+from .data.points.frame import Frame
+from .data.points.pillarize import PillarSpec, pillarize, select_columns
 
 
 def head_classes(cfg) -> dict:
-    """Head name -> its classes: DSFEC's Car/Truck/VRU heads, or a CenterHead's single one."""
-    return {"center": tuple(cfg.classes)} if cfg.family == "radarnext" else dict(zip(HEAD_NAMES, cfg.head_classes))
+    """Head name -> its classes (DSFEC's Car/Truck/VRU heads, a CenterHead's single one, ...)."""
+    return zoo.family_of(cfg).head_classes(cfg)
 
 
 def decoder(cfg, top_k: int):
     """fn(head outputs) -> (boxes, scores, labels): the top-k decoded candidates before NMS
     (what the jitted predictors run after the network, and what `deploy.export` writes to ONNX)."""
-    if cfg.family == "radarnext":
-        return lambda maps: decode_center_head(maps, cfg.grid, cfg.output_stride, top_k)
-    cells, heads = cell_centres(cfg.grid, cfg.output_stride), head_classes(cfg)
-    return lambda maps: decode_heads(maps, heads, cells, top_k)
+    return zoo.family_of(cfg).decoder(cfg, top_k)
 
 
 def decoded_network(detector, top_k: int):
@@ -77,8 +71,8 @@ class HostPipeline:
         return [self._postprocess(b, s, l) for b, s, l in zip(boxes, scores, labels)]
 
     def _nothing(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        width = 7 if "center" in self.head_classes else 5  # a CenterHead decodes 3D boxes
-        return np.zeros((0, width), np.float32), np.zeros(0, np.float32), np.zeros(0, np.int32)
+        # no box: BEV (5 columns) and 3D (7) decodes give the same empty Boxes
+        return np.zeros((0, 5), np.float32), np.zeros(0, np.float32), np.zeros(0, np.int32)
 
     def _postprocess(self, boxes, scores, labels) -> Detections:
         """Rotated NMS per class, then Boxes. The decoded width says what the network predicts:
@@ -103,30 +97,24 @@ class HostPipeline:
 
 class Predictor(HostPipeline):
     """`predictor(points_NxF | Frame) -> Detections` with the jitted JAX network and decode.
-    Points' columns follow the model's `point_features` unless a Frame (named columns) is given."""
+    Points' columns follow the model's `point_features` unless a Frame (named columns) is given.
+    `top_k`, `nms_iou` and `max_boxes` default to the family's (Family.predictor): DSFEC 100 /
+    0.2 / 500; RadarNeXt the public config's 500 decoded candidates, IoU 0.2 on the BEV
+    footprints of its 3D boxes, at most 83 boxes a frame."""
 
-    def __init__(self, detector, variables, score_threshold: float = 0.1, top_k: int = 100,
-                 nms_iou: float = 0.2, max_boxes: int = 500):
+    def __init__(self, detector, variables, score_threshold: float = 0.1, top_k: int | None = None,
+                 nms_iou: float | None = None, max_boxes: int | None = None):
         cfg = detector.config
+        given = {"top_k": top_k, "nms_iou": nms_iou, "max_boxes": max_boxes}
+        options = {**zoo.family_of(cfg).predictor, **{k: v for k, v in given.items() if v is not None}}
         self.detector, self.variables = detector, variables
-        self._setup(PillarSpec.of(cfg), head_classes(cfg), score_threshold, nms_iou, max_boxes)
-        self.network = jax.jit(decoded_network(detector, top_k))
+        self._setup(PillarSpec.of(cfg), head_classes(cfg), score_threshold, options["nms_iou"], options["max_boxes"])
+        self.network = jax.jit(decoded_network(detector, options["top_k"]))
 
     def run(self, batch: dict):
         return jax.device_get(self.network(self.variables, batch))
 
 
-class CenterPredictor(Predictor):
-    """The same pipeline for CenterHead detectors (RadarNeXt), with the public config's defaults:
-    3D boxes come out of the network (centre z and height included); rotated NMS per class on
-    their BEV footprints (IoU 0.2), 500 decoded candidates, at most 83 boxes per frame after NMS."""
-
-    def __init__(self, detector, variables, score_threshold: float = 0.1, top_k: int = 500,
-                 nms_iou: float = 0.2, max_boxes: int = 83):
-        super().__init__(detector, variables, score_threshold, top_k, nms_iou, max_boxes)
-
-
 def predictor_for(detector, variables, **options) -> HostPipeline:
-    """The JAX predictor matching the detector's head (dense PIXOR heads or a CenterHead)."""
-    cls = CenterPredictor if detector.config.family == "radarnext" else Predictor
-    return cls(detector, variables, **options)
+    """The JAX predictor of a detector, with its family's defaults (kept for callers of the old API)."""
+    return Predictor(detector, variables, **options)

@@ -19,14 +19,29 @@ from typing import Any
 
 import jax
 
-from .models.variants import RADARNEXT_VARIANTS, VARIANTS
+from .models.dsfec.family import FAMILY as DSFEC
+from .models.family import Family
+from .models.radarnext.family import FAMILY as RADARNEXT
 
-REGISTRY: dict[str, Any] = {**VARIANTS, **RADARNEXT_VARIANTS}
+# The registry of families: a new family is its folder under models/ plus one entry here.
+FAMILIES: dict[str, Family] = {f.name: f for f in (DSFEC, RADARNEXT)}
+REGISTRY: dict[str, Any] = {name: cfg for f in FAMILIES.values() for name, cfg in f.variants.items()}
 
 
 def available(family: str | None = None) -> list[str]:
-    """Names of the registered variants, optionally of one family ('dsfec', 'radarnext')."""
-    return sorted(n for n, cfg in REGISTRY.items() if family is None or cfg.family == family)
+    """Names of the registered variants, optionally of one family (a key of FAMILIES)."""
+    if family is not None and family not in FAMILIES:
+        raise KeyError(f"unknown family {family!r}; families: {sorted(FAMILIES)}")
+    return sorted(REGISTRY if family is None else FAMILIES[family].variants)
+
+
+def family_of(cfg_or_name) -> Family:
+    """The Family record of a config (or of a registered variant's name)."""
+    cfg = config(cfg_or_name) if isinstance(cfg_or_name, str) else cfg_or_name
+    for family in FAMILIES.values():
+        if type(cfg) is family.config_class:
+            return family
+    raise TypeError(f"{type(cfg).__name__} belongs to no registered family; families: {sorted(FAMILIES)}")
 
 
 def config(name: str, /, **overrides):
@@ -75,26 +90,24 @@ class Detector:
 
 def deploy_config(cfg):
     """The inference-form config of any variant (itself for families without one)."""
-    from .models import radarnext
-
-    return radarnext.deploy_config(cfg) if isinstance(cfg, radarnext.RadarNeXtConfig) else cfg
+    return family_of(cfg).deploy_config(cfg)
 
 
 def deploy(detector: Detector, variables: dict) -> tuple[Detector, dict]:
     """The inference form of a re-parameterizable detector (RadarNeXt: MobileOne branches fused
     into single convs, training-only outputs dropped) and its variables; eval-mode outputs agree.
     Families without a deploy form come back unchanged."""
-    from .models import radarnext
-
-    if not isinstance(detector.config, radarnext.RadarNeXtConfig):
+    family = family_of(detector.config)
+    fused = family.deploy_config(detector.config)
+    if fused == detector.config:
         return detector, variables
-    return Detector(deploy_config(detector.config)), radarnext.deploy_variables(detector.config, variables)
+    return Detector(fused), family.deploy_variables(detector.config, variables)
 
 
 def input_columns(name: str) -> str:
-    """The point columns variant `name` reads from a source (data.sources.load_frames' features):
-    RadarNeXt a source's own ('native': VoD's 7, TJ4D's 8), DSFEC the nuScenes ones ('dsfec')."""
-    return "native" if config(name).family == "radarnext" else "dsfec"
+    """The point columns variant `name` reads from a source (data.points.sources.load_frames'
+    features): a source's own ('native': VoD's 7, TJ4D's 8) or the nuScenes ones ('dsfec')."""
+    return family_of(name).input_columns
 
 
 def create(name: str, /, **overrides) -> Detector:
@@ -111,7 +124,7 @@ def shipped_weights(name: str) -> Path:
 
 def load_variables(detector: Detector, path: str | Path) -> dict:
     """{'params', 'batch_stats'} from a weights file or a training checkpoint, shape-checked."""
-    from . import checkpoint
+    from .core import checkpoint
 
     raw = checkpoint.load(path)
     missing = [k for k in ("params", "batch_stats") if k not in raw]

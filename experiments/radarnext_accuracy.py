@@ -21,7 +21,7 @@ import json
 import sys
 from pathlib import Path
 
-from dsfec_jax.atomic import write_json
+from dsfec_jax.core.atomic import write_json
 
 
 def read_run(run_dir: Path) -> dict:

@@ -19,11 +19,11 @@ import sys
 import jax
 
 from dsfec_jax import zoo
-from dsfec_jax.atomic import write_text
-from dsfec_jax.grid import VOD_GRID, Grid
+from dsfec_jax.core.atomic import write_text
+from dsfec_jax.core.grid import VOD_GRID, Grid
 from dsfec_jax.profile import counting, latency
-from dsfec_jax.profile.environment import environment
-from dsfec_jax.profile.paper_radarnext import TABLE2, TABLE3
+from dsfec_jax.core.environment import environment
+from dsfec_jax.models.radarnext.paper import TABLE2, TABLE3
 
 SMALL_GRID = Grid((0.0, 12.8), (-6.4, 6.4), (-3.0, 2.0), 0.16)
 SEED = 0

@@ -9,7 +9,7 @@ gives FPS on an RTX A4000 and a Jetson AGX Orin.
 
 from __future__ import annotations
 
-from dsfec_jax.profile.paper_radarnext import TABLE2
+from dsfec_jax.models.radarnext.paper import TABLE2
 from search import grid
 
 from .common import fmt, run_table

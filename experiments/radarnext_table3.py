@@ -9,7 +9,7 @@ Position 3 fits no single feature map of the public neck by its parameter count 
 
 from __future__ import annotations
 
-from dsfec_jax.profile.paper_radarnext import TABLE3
+from dsfec_jax.models.radarnext.paper import TABLE3
 from search import grid
 
 from .common import fmt, run_table

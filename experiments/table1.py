@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from dsfec_jax.profile import paper
+from dsfec_jax.models.dsfec import paper
 from dsfec_jax.profile.zoo_table import RECORDS, shipped_accuracy
 
 MODELS = ("baseline", "dsfec_l", "dsfec_m", "dsfec_s")

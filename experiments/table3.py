@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dsfec_jax.profile import paper
+from dsfec_jax.models.dsfec import paper
 from search import blocks
 
 from .common import fmt, run_table

@@ -7,11 +7,11 @@ import shlex
 import sys
 from pathlib import Path
 
-from dsfec_jax import atomic, zoo
+from dsfec_jax.core import atomic
 
-from .recipes import RECIPES, get_recipe
+from .recipes import PROFILES, get_recipe
 from .report import write_reports
-from .oneshot import run_oneshot, supernet_overrides
+from .oneshot import hooks, run_oneshot, supernet_overrides
 from .runners import run_local, run_ray
 from .space import SearchSpaceError
 from .trial import make_trial
@@ -20,7 +20,7 @@ from .trial import make_trial
 def parser(prog: str, doc: str, base: str = "dsfec_l", strategy: str = "train") -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=prog, description=doc.strip().splitlines()[0])
     p.add_argument("--base", default=base, help="registered model the candidates override")
-    p.add_argument("--profile", default="quick", choices=sorted(RECIPES), help="training recipe per trial")
+    p.add_argument("--profile", default="quick", choices=PROFILES, help="training recipe per trial")
     p.add_argument("--data", default=None, help="synthetic | synthetic4d | vod:PATH | tj4d:PATH | nuscenes:DATAROOT "
                    "(default: the profile's benchmark, synthetic4d for RadarNeXt bases)")
     p.add_argument("--out", default=None, help="RUN_DIR (default runs/search/<name>); re-running resumes it")
@@ -46,12 +46,8 @@ def run_search(args, name: str, candidates_fn, title: str, base_label: str | Non
     try:
         recipe = get_recipe(args.profile, args.base)
         candidates = candidates_fn()
-        if args.strategy == "oneshot" and zoo.config(args.base).family != "dsfec":
-            raise SearchSpaceError(f"--strategy oneshot: the weight-sharing supernet is DSFEC's (elastic "
-                                   f"stage_blocks); {args.base!r} is a {zoo.config(args.base).family} model, "
-                                   "use --strategy train")
         if args.strategy == "oneshot":
-            supernet_overrides(candidates)
+            supernet_overrides(candidates, hooks(args.base).field)
             if args.backend != "local":
                 raise SearchSpaceError("--strategy oneshot trains one supernet in this process; "
                                        "--backend ray is for --strategy train")

@@ -1,7 +1,7 @@
 """Which trained weights a candidate starts from.
 
-A recipe with `warm_start` starts every candidate of a *depth* sweep (overrides = stage_blocks
-only) from the base model's shipped weights: the candidate keeps the first k blocks of each
+A recipe with `warm_start` starts every candidate of a *depth* sweep (overrides = the family's
+elastic depth field only, its supernet's `field`: DSFEC's stage_blocks) from the base model's shipped weights: the candidate keeps the first k blocks of each
 stage (Once-for-All's elastic depth), then trains with the recipe. Without it a 2-core `quick`
 profile leaves DSFEC-L at noise-level mAP (0.1-0.4 Car mAP after 150-500 CPU steps from scratch). The price is a bias toward the base's own depth (it starts as the exact
 trained network); it is named in every record (`init`) and report. Other axes (stem filters,
@@ -13,17 +13,17 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from dsfec_jax import checkpoint, zoo
+from dsfec_jax.core import checkpoint
+from dsfec_jax import zoo
 
 from .recipes import get_recipe
 
 
 def source_weights(base: str, overrides: dict, recipe: str) -> Path | None:
     """The weights file a trial of this (base, overrides, recipe) starts from, or None (scratch)."""
-    path = zoo.shipped_weights(base)
-    if not get_recipe(recipe, base).warm_start or set(overrides) - {"stage_blocks"} or not path.is_file():
-        return None
-    return path
+    path, supernet = zoo.shipped_weights(base), zoo.family_of(base).supernet
+    depth_only = supernet is not None and not set(overrides) - {supernet.field}
+    return path if get_recipe(recipe, base).warm_start and depth_only and path.is_file() else None
 
 
 def describe(path: Path | None) -> str:

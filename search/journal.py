@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from dsfec_jax import atomic
+from dsfec_jax.core import atomic
 
 
 class Journal:

@@ -1,99 +1,101 @@
 """The one-shot strategy: train one weight-sharing supernet, then rank every candidate with the
 weights it inherits.
 
+Any family whose record has a `Supernet` (DSFEC: elastic stage_blocks) can be searched this way.
 The supernet has the most blocks any candidate has in each stage; a candidate (subnet) uses the
 first k blocks of each stage, which in Flax means the subset of the supernet's top-level
-parameter entries whose names it shares (`stage2_block0..k-1`). Each step trains one subnet
-drawn uniformly from the candidates (each round of len(candidates) steps visits every
-candidate once, in a seeded random order); only its parameters move. The subnet's depth is a
-traced input of the supernet (`DSFECNet.backbone(depth=...)`), so one compiled step trains
-every subnet and one compiled function recalibrates them: compiles, not steps, dominate a
-2-core budget. Before a subnet is evaluated its batch-norm statistics are recalibrated on
+parameter entries that the family's `Supernet.blocks` maps below depth k (DSFEC:
+`stage2_block0..k-1`). Each step trains one subnet drawn uniformly from the candidates (each
+round of len(candidates) steps visits every candidate once, in a seeded random order); only its
+parameters move. The subnet's depth is a traced input of the supernet (DSFEC:
+`DSFECNet.backbone(depth=...)`), so one compiled step (train.step's, with the idle blocks kept)
+trains every subnet and one compiled function recalibrates them: compiles, not steps, dominate
+a 2-core budget. Before a subnet is evaluated its batch-norm statistics are recalibrated on
 training batches, because the supernet's running statistics mix every subnet's activations.
 """
 
 from __future__ import annotations
 
 import hashlib
-import re
 import time
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
-from dsfec_jax import checkpoint, zoo
-from dsfec_jax.data.batches import BatchStream, collate
-from dsfec_jax.data.pillarize import PillarSpec
-from dsfec_jax.data.sources import load_frames
-from dsfec_jax.layers.conv import BN_MOMENTUM
-from dsfec_jax.evaluate import evaluate
-from dsfec_jax.models.dsfec import HEAD_NAMES
-from dsfec_jax.predict import Predictor
-from dsfec_jax.profile.environment import environment
-from dsfec_jax.profile.records import profile
+from dsfec_jax.core import checkpoint
+from dsfec_jax import zoo
+from dsfec_jax.core.environment import environment
 from dsfec_jax.core.provenance import jsonable
-from dsfec_jax.train.losses import LossConfig, detection_loss
+from dsfec_jax.data.batches import BatchStream, collate
+from dsfec_jax.data.points.pillarize import PillarSpec
+from dsfec_jax.data.points.sources import load_frames
+from dsfec_jax.evaluate import validate
+from dsfec_jax.predict import Predictor
+from dsfec_jax.profile.records import profile
 from dsfec_jax.train.schedules import optimizer
-from dsfec_jax.train.step import init_state
+from dsfec_jax.train.step import init_state, train_step_fn
 
-from . import significance
 from .inherit import initial_variables
 from .journal import Journal
 from .recipes import get_recipe
 from .space import SearchSpaceError
-from .trial import COST_COLUMNS
+from .trial import match_classes, measured
 
 # Batch-norm recalibration reads at most this many training batches (one pass over the frames at
 # most). Measured on two saved quick stage-2 supernets: with 8 batches (32 frames) two draws of the
 # calibration frames moved a candidate's Car mAP by up to 1.8 points (rms 1.2) and reordered them;
 # with 64, by at most 0.7 (rms 0.5, mostly a shift shared by every candidate) and never reordered them.
 CALIBRATION_BATCHES = 64
-BLOCK = re.compile(r"stage(\d)_block(\d+)$")
 
 
-def supernet_overrides(candidates: list[dict]) -> dict:
-    """The supernet: per stage the most blocks of any candidate. Only depth may differ."""
-    others = [{k: v for k, v in c["overrides"].items() if k != "stage_blocks"} for c in candidates]
-    if any(o != others[0] for o in others) or not all("stage_blocks" in c["overrides"] for c in candidates):
+def hooks(base: str):
+    """The supernet hooks of `base`'s family; a family without them cannot share weights."""
+    family = zoo.family_of(base)
+    if family.supernet is None:
+        raise SearchSpaceError(f"--strategy oneshot: the {family.name} family has no weight-sharing supernet "
+                               f"(its record's `supernet`); {base!r} needs --strategy train")
+    return family.supernet
+
+
+def supernet_overrides(candidates: list[dict], field: str) -> dict:
+    """The supernet: per stage the most blocks of any candidate. Only depth (`field`) may differ."""
+    others = [{k: v for k, v in c["overrides"].items() if k != field} for c in candidates]
+    if any(o != others[0] for o in others) or not all(field in c["overrides"] for c in candidates):
         raise SearchSpaceError("--strategy oneshot shares weights across depths only: every candidate must "
-                               "differ from the others in stage_blocks and nothing else")
-    depth = np.max([c["overrides"]["stage_blocks"] for c in candidates], axis=0)
-    return {**others[0], "stage_blocks": tuple(int(d) for d in depth)}
+                               f"differ from the others in {field} and nothing else")
+    depth = np.max([c["overrides"][field] for c in candidates], axis=0)
+    return {**others[0], field: tuple(int(d) for d in depth)}
 
 
-def subset(tree: dict, keys) -> dict:
-    return {k: tree[k] for k in keys if k in tree}
+def in_subnet(key: str, depth, blocks: dict):
+    """Does the subnet of `depth` (traced ints, one per stage) use the supernet's top-level module
+    `key`? `blocks`: module -> (stage, block) of the modules a subnet may leave idle."""
+    if key not in blocks:
+        return True
+    stage, block = blocks[key]
+    return block < depth[stage]
 
 
-def in_subnet(key: str, depth):
-    """Does the subnet of `depth` (traced int (4,)) use the supernet's top-level module `key`?"""
-    m = BLOCK.match(key)
-    return True if m is None else int(m[2]) < depth[int(m[1]) - 1]
-
-
-def keep_idle(new: dict, old: dict, depth) -> dict:
+def keep_idle(new: dict, old: dict, depth, blocks: dict) -> dict:
     """`new` for the subnet's modules, `old` for the supernet's idle blocks."""
-    return {k: jax.tree.map(lambda n, o, a=in_subnet(k, depth): jnp.where(a, n, o), new[k], old[k]) for k in old}
+    return {k: jax.tree.map(lambda n, o, a=in_subnet(k, depth, blocks): jnp.where(a, n, o), new[k], old[k])
+            for k in old}
 
 
-def supernet_step(supernet, tx, loss_cfg: LossConfig):
-    """One jitted step (state, batch, depth) -> (state, loss) that trains the subnet of `depth`."""
-    def loss_fn(params, batch_stats, batch, depth):
-        variables = {"params": params, "batch_stats": batch_stats}
-        outputs, updates = supernet.apply(variables, {**batch["inputs"], "depth": depth}, train=True)
-        return detection_loss(outputs, batch["targets"], loss_cfg)[0], updates["batch_stats"]
+def supernet_step(supernet, tx):
+    """One jitted step (state, batch, depth) -> (state, loss) that trains the subnet of `depth`:
+    train.step's step with the depth as a traced input, then the idle blocks put back (their
+    gradients are 0, but weight decay and momentum must not move them either)."""
+    net = zoo.family_of(supernet.config).supernet
+    blocks = net.blocks(supernet.config)
+    inner = train_step_fn(supernet, tx, (net.input,))
 
     def step(state, batch, depth):
-        grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
-        (loss, stats), grads = grad_fn(state["params"], state["batch_stats"], batch, depth)  # idle blocks: 0
-        updates, opt_state = tx.update(grads, state["opt_state"], state["params"])
-        moved = optax.apply_updates(state["params"], updates)
-        return {"params": keep_idle(moved, state["params"], depth),  # weight decay must not move idle blocks
-                "batch_stats": keep_idle(stats, state["batch_stats"], depth),
-                "opt_state": opt_state, "step": state["step"] + 1}, loss
+        new, metrics = inner(state, batch, depth)
+        return {**new, "params": keep_idle(new["params"], state["params"], depth, blocks),
+                "batch_stats": keep_idle(new["batch_stats"], state["batch_stats"], depth, blocks)}, metrics["loss"]
 
     return jax.jit(step, donate_argnums=0)
 
@@ -104,10 +106,10 @@ class SubnetPredictor(Predictor):
 
     def __init__(self, supernet, variables, depth, **options):
         super().__init__(supernet, variables, **options)
-        self.depth = depth
+        self.depth, self.depth_input = depth, zoo.family_of(supernet.config).supernet.input
 
     def run(self, batch: dict):
-        return jax.device_get(self.network(self.variables, {**batch, "depth": self.depth}))
+        return jax.device_get(self.network(self.variables, {**batch, self.depth_input: self.depth}))
 
 
 def module_keys(detector) -> tuple[str, ...]:
@@ -117,14 +119,16 @@ def module_keys(detector) -> tuple[str, ...]:
 def recalibrator(supernet):
     """(variables, batches, depth) -> BN running statistics of the subnet of `depth` = the mean of
     its batch statistics over `batches` (one compiled function for every depth)."""
-    batch_stats = jax.jit(lambda v, x, d: supernet.apply(v, {**x, "depth": d}, train=True)[1]["batch_stats"])
+    net = zoo.family_of(supernet.config).supernet
+    momentum = net.bn_momentum
+    batch_stats = jax.jit(lambda v, x, d: supernet.apply(v, {**x, net.input: d}, train=True)[1]["batch_stats"])
 
     def recalibrate(variables: dict, batches: list[dict], depth) -> dict:
         means = []
         for batch in batches:
             new, old = batch_stats(variables, batch["inputs"], depth), variables["batch_stats"]
             # new = m * old + (1 - m) * batch  =>  batch = (new - m * old) / (1 - m)
-            means.append(jax.tree.map(lambda n, o: (n - BN_MOMENTUM * o) / (1 - BN_MOMENTUM), new, old))
+            means.append(jax.tree.map(lambda n, o: (n - momentum * o) / (1 - momentum), new, old))
         return jax.tree.map(lambda *x: np.mean(np.stack(x), 0), *means)
 
     return recalibrate
@@ -133,7 +137,7 @@ def recalibrator(supernet):
 def calibration_batches(stream: BatchStream, spec: PillarSpec) -> list[dict]:
     """The first min(CALIBRATION_BATCHES, one epoch) batches of the training order, unaugmented:
     distinct training frames, the same for every candidate (so candidates are compared on one draw)."""
-    return [collate([stream.frames[j] for j in stream.indices(s)], spec, stream.head_classes, stream.stride)
+    return [collate([stream.frames[j] for j in stream.indices(s)], spec, stream.targets_fn, stream.origin_input)
             for s in range(min(CALIBRATION_BATCHES, stream.per_epoch))]
 
 
@@ -158,20 +162,20 @@ def run_oneshot(base: str, trials: list[dict], run_dir: str | Path, retry_failed
 
 def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[str], log) -> None:
     recipe, seed, data = get_recipe(trials[0]["recipe"], base), trials[0]["seed"], trials[0]["data"]
-    fixed = recipe.model_overrides()
-    supernet = zoo.create(base, **supernet_overrides(trials), **fixed)
-    frames = load_frames(data, "train", recipe.train_frames, seed=0)
+    family, net, fixed = zoo.family_of(base), hooks(base), recipe.model_overrides()
+    supernet = zoo.create(base, **supernet_overrides(trials, net.field), **fixed)
+    frames = load_frames(data, "train", recipe.train_frames, seed=0, features=family.input_columns)
     cfg = supernet.config
-    heads = dict(zip(HEAD_NAMES, cfg.head_classes))
-    stream = BatchStream(frames, PillarSpec.of(cfg), heads, cfg.output_stride, recipe.schedule.batch_size, seed)
-    depths = [jnp.asarray(zoo.config(base, **t["overrides"], **fixed).stage_blocks, jnp.int32) for t in trials]
+    stream = BatchStream(frames, PillarSpec.of(cfg), family.targets(cfg), recipe.schedule.batch_size, seed,
+                         origin_input=family.origin_input)
+    depths = [jnp.asarray(getattr(zoo.config(base, **t["overrides"], **fixed), net.field), jnp.int32) for t in trials]
     steps = recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
     state, supernet_s, supernet_cpu = _supernet(supernet, stream, depths, recipe, steps, seed,
                                                 journal.path.parent / supernet_file(trials), log,
                                                 initial_variables(trials[0].get("init", "scratch")))
     recalibrate = recalibrator(supernet)
     calib = calibration_batches(stream, PillarSpec.of(cfg))
-    val = load_frames(data, "val", recipe.val_frames, seed=0)
+    val = load_frames(data, "val", recipe.val_frames, seed=0, features=family.input_columns)
     predictor = SubnetPredictor(supernet, None, depths[0])
     for trial, depth in zip(trials, depths):
         if trial["key"] not in todo:
@@ -179,22 +183,17 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
         t1, c1 = time.perf_counter(), time.process_time()
         stats = recalibrate({"params": state["params"], "batch_stats": state["batch_stats"]}, calib, depth)
         predictor.variables, predictor.depth = {"params": state["params"], "batch_stats": stats}, depth
-        result = evaluate(predictor, val, match_classes=(significance.CLASS,))
+        scores, tables = validate(family.metric.name, predictor, val, match_classes(family))
         costs = measured_costs(journal, trial) or profile(
             [zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats, warmup=1,
             light=recipe.light_profile)[0]
-        metrics = {kk: result[kk] for kk in ("car_mAP", "car_AP4", "mAP")}
-        metrics.update(class_mAP=result["metrics"]["class_mAP"], **{"AP@4": result["metrics"]["AP@4"]})
-        journal.append({**trial, "status": "ok", "metrics": metrics,
-                        "matches": significance.matches_entry(result["metrics"]["match_tables"]),
-                        "costs": {c: costs[c] for c in COST_COLUMNS},
-                        **({"costs_from": costs["from"]} if "from" in costs else {}),
-                        "supernet": {"stage_blocks": list(cfg.stage_blocks), "steps": steps,
+        journal.append({**trial, "status": "ok", **measured(scores, tables, costs),
+                        "supernet": {net.field: list(getattr(cfg, net.field)), "steps": steps,
                                      "wall_s": round(supernet_s, 1), "cpu_s": round(supernet_cpu, 1)},
                         "wall_s": round(supernet_s / len(trials) + time.perf_counter() - t1, 1),
                         "cpu_s": round(supernet_cpu / len(trials) + time.process_time() - c1, 1),
                         "environment": environment()})
-        log(f"    {trial['label']}: car mAP {metrics['car_mAP']:.2f} (inherited weights)")
+        log(f"    {trial['label']}: {family.metric.headline} {scores[family.metric.headline]:.2f} (inherited weights)")
 
 
 def measured_costs(journal: Journal, trial: dict) -> dict | None:
@@ -229,7 +228,7 @@ def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, pat
             return state, manifest["wall_s"], manifest["cpu_s"]
     t0, c0 = time.perf_counter(), time.process_time()
     state = init_state(supernet, tx, jax.random.key(seed), init)
-    step_fn = supernet_step(supernet, tx, LossConfig())
+    step_fn = supernet_step(supernet, tx)
     for step in range(steps):
         round_, pos = divmod(step, len(depths))
         i = int(np.random.default_rng([seed, 7, round_]).permutation(len(depths))[pos])
@@ -238,7 +237,8 @@ def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, pat
         if not np.isfinite(float(loss)):
             raise FloatingPointError(f"supernet loss is {float(loss)} at step {step}")
     wall_s, cpu_s = time.perf_counter() - t0, time.process_time() - c0
-    log(f"supernet {supernet.config.stage_blocks}: {steps} steps in {wall_s:.0f} s")
+    field = zoo.family_of(supernet.config).supernet.field
+    log(f"supernet {getattr(supernet.config, field)}: {steps} steps in {wall_s:.0f} s")
     checkpoint.save(path, state, {"steps": steps, "seed": seed, "wall_s": round(wall_s, 1), "cpu_s": round(cpu_s, 1),
-                                  "stage_blocks": list(supernet.config.stage_blocks)})
+                                  field: list(getattr(supernet.config, field))})
     return state, wall_s, cpu_s

@@ -1,16 +1,14 @@
-"""How much each trial trains and where it is measured.
+"""How much each trial trains and where it is measured, per family (its record's `recipes`).
 
-`smoke` checks the whole pipeline in about a minute per trial (8 m x 8 m grid, 2 steps); its
-numbers mean nothing. `quick` fits a sweep into ~15 minutes on a 2-core CPU: a 32 m x 32 m grid
-in front of the sensor (64 x 64 cells), 150 steps of batch 4 per trial (240 for a whole one-shot
-supernet) and 100 validation frames; depth sweeps start from the base's shipped weights
-(search.inherit). Its mAP differences below ~1.5 points are noise (README, "What the quick
-stage-2 sweep measures"). `paper` trains on the whole grid with the paper's schedule. Sizes and latency are always profiled on the model's own (full) grid, so the
-cost columns are comparable with the paper whatever the recipe.
-
-RadarNeXt-family bases have recipes of their own (`RADARNEXT_RECIPES`, same names): the
-synthetic 4D (View-of-Delft-like) benchmark, RadarNeXt's schedule, training on 96-cell windows
-of the 0.16 m VoD grid and validating on the whole grid with the VoD 3D AP.
+`smoke` checks the whole pipeline in about a minute per trial; its numbers mean nothing. `quick`
+fits a sweep into ~15 minutes on a 2-core CPU: for DSFEC a 32 m x 32 m grid in front of the
+sensor (64 x 64 cells), 150 steps of batch 4 per trial (240 for a whole one-shot supernet) and
+100 validation frames, depth sweeps starting from the base's shipped weights (search.inherit);
+its mAP differences below ~1.5 points are noise (README, "What the quick stage-2 sweep
+measures"). For RadarNeXt: the synthetic 4D (View-of-Delft-like) benchmark, RadarNeXt's schedule,
+96-cell windows of the 0.16 m VoD grid, validation on the whole grid with the VoD 3D AP. `paper`
+trains on the whole grid with the paper's schedule. Sizes and latency are always profiled on the
+model's own (full) grid, so the cost columns are comparable with the paper whatever the recipe.
 """
 
 from __future__ import annotations
@@ -18,7 +16,8 @@ from __future__ import annotations
 import dataclasses
 
 from dsfec_jax import zoo
-from dsfec_jax.grid import DSFEC_GRID, VOD_GRID, Grid
+from dsfec_jax.core.grid import Grid
+from dsfec_jax.models.family import SearchRecipe
 from dsfec_jax.train.schedules import Schedule, get_schedule
 
 
@@ -44,36 +43,23 @@ class Recipe:
         return out
 
 
-NEAR_GRID = Grid((0.0, 32.0), (-16.0, 16.0), DSFEC_GRID.z_range, DSFEC_GRID.cell)
-SMOKE_GRID = Grid((0.0, 8.0), (-4.0, 4.0), DSFEC_GRID.z_range, DSFEC_GRID.cell)
-
-RECIPES = {
-    "smoke": Recipe("smoke", get_schedule("quick", steps=2, batch_size=2, warmup_steps=1), 4, 2, SMOKE_GRID, 64, None, 1,
-                    supernet_steps=4, light_profile=True),
-    "quick": Recipe("quick", get_schedule("quick", steps=150, batch_size=4, warmup_steps=15), 400, 100,
-                    NEAR_GRID, 512, None, 20, supernet_steps=240, light_profile=True, warm_start=True),
-    "paper": Recipe("paper", get_schedule("paper"), 4800, 500, None, 2048, None, 20,
-                    supernet_steps=None, light_profile=False),
-}
+def build(name: str, spec: SearchRecipe, data: str) -> Recipe:
+    """A family's recipe data -> the Recipe a trial runs (its schedule built from train.schedules)."""
+    fields = {f.name: getattr(spec, f.name) for f in dataclasses.fields(SearchRecipe)
+              if f.name not in ("schedule", "schedule_changes")}
+    return Recipe(name, get_schedule(spec.schedule, **spec.schedule_changes), data=data, **fields)
 
 
-# a synthetic-4D frame holds ~1,100 points, so 2,048 pillar slots never drop one (the config's
-# 16,000 is the public code's bound for real 5-scan VoD); fewer slots make each step cheaper
-RADARNEXT_SMOKE_GRID = Grid((0.0, 12.8), (-6.4, 6.4), VOD_GRID.z_range, VOD_GRID.cell)
-RADARNEXT_RECIPES = {
-    "smoke": Recipe("smoke", get_schedule("radarnext", steps=2, batch_size=2, warmup_steps=1), 4, 2,
-                    RADARNEXT_SMOKE_GRID, 256, None, 1, supernet_steps=None, light_profile=True, data="synthetic4d"),
-    # the paper's decay points (35/80, 45/80) would spend half of a short run at 1 % of the rate
-    "quick": Recipe("quick", get_schedule("radarnext", steps=300, batch_size=4, warmup_steps=30, decay_at=(0.7, 0.9)),
-                    400, 40, None, 2048, 96, 10, supernet_steps=None, light_profile=True, data="synthetic4d"),
-    "paper": Recipe("paper", get_schedule("radarnext"), 4800, 500, None, 16000, None, 20,
-                    supernet_steps=None, light_profile=False, data="synthetic4d"),
-}
+# family name -> recipe name -> Recipe (tests and users may replace an entry)
+RECIPES: dict[str, dict[str, Recipe]] = {
+    family.name: {name: build(name, spec, family.benchmark) for name, spec in family.recipes.items()}
+    for family in zoo.FAMILIES.values()}
+PROFILES = sorted({name for table in RECIPES.values() for name in table})
 
 
-def get_recipe(name: str, base: str | None = None) -> Recipe:
-    """The recipe `name` for the family of `base` (DSFEC's when no base is given)."""
-    table = RADARNEXT_RECIPES if base is not None and zoo.config(base).family == "radarnext" else RECIPES
+def get_recipe(name: str, base: str) -> Recipe:
+    """The recipe `name` for the family of registered model `base`."""
+    table = RECIPES[zoo.family_of(base).name]
     if name not in table:
-        raise ValueError(f"unknown profile {name!r}; valid: {sorted(table)}")
+        raise ValueError(f"unknown profile {name!r} for {base!r}; valid: {sorted(table)}")
     return table[name]

@@ -15,25 +15,26 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-from dsfec_jax import atomic
+from dsfec_jax import zoo
+from dsfec_jax.core import atomic
 
 from . import significance
 from .journal import Journal
 
-# (record key, column title, digits); the first column is the headline the plots and logs use
-COLUMNS = (("car_mAP", "Car mAP", 2), ("car_AP4", "Car AP@4", 2), ("mAP", "mAP (4 classes)", 2),
-           ("gflops", "GFLOPs", 2), ("params", "Params (M)", 3), ("memory_mb", "Memory (MB)", 2),
-           ("latency_ms", "Latency (ms)", 1))
-# RadarNeXt's tables (View-of-Delft 3D AP; params of the fused form; no stem-memory column)
-VOD_COLUMNS = (("mAP", "mAP (VoD 3D)", 2), ("mAP_corridor", "mAP corridor", 2), ("AP_car", "Car AP", 2),
-               ("AP_pedestrian", "Pedestrian AP", 2), ("AP_bicycle", "Cyclist AP", 2),
-               ("gflops", "GFLOPs", 2), ("params", "Params (M)", 3), ("latency_ms", "Latency (ms)", 1))
+def protocol(records: list[dict]):
+    """The metric protocol of the family the trials' base belongs to (models.family.MetricProtocol):
+    its columns lay out the tables (first = the headline), its `match_class` asks for bootstrap
+    intervals and its `zero_class_note` for the note on classes scoring 0 everywhere."""
+    bases = {r.get("base") for r in records}
+    if len(bases) != 1 or None in bases:
+        raise ValueError(f"journal records name bases {sorted(map(str, bases))}; expected one registered model "
+                         "(every trial record carries its 'base')")
+    return zoo.family_of(bases.pop()).metric
 
 
 def columns_for(records: list[dict]) -> tuple:
-    """The VoD columns when the trials were scored with the VoD protocol, else DSFEC's."""
-    vod = any("mAP_corridor" in r.get("metrics", {}) for r in records)
-    return VOD_COLUMNS if vod else COLUMNS
+    """(record key, column title, digits) of the report's columns."""
+    return protocol(records).columns
 
 
 def headline(records: list[dict]) -> tuple[str, str]:
@@ -87,7 +88,7 @@ def _interval(sig: dict | None, label: str) -> list[str]:
     return ["-" if d is None else f"[{d['ci95'][0]:+.2f}, {d['ci95'][1]:+.2f}]"]
 
 
-def markdown(table: list[dict], base_label: str | None, title: str, columns: tuple = COLUMNS,
+def markdown(table: list[dict], base_label: str | None, title: str, columns: tuple,
              sig: dict | None = None) -> str:
     """The table; with `sig` (search.significance) a column of bootstrap intervals and its summary."""
     base = next((r for r in table if r["label"] == base_label), None)
@@ -137,11 +138,12 @@ def provenance(records: list[dict], meta: dict) -> str:
     strategy = meta.get("strategy") or (records[0].get("strategy", "train"))
     wall = sum(r.get("wall_s", 0) for r in records)
     line = f"Profile `{meta.get('profile', records[0].get('recipe'))}`, strategy `{strategy}`"
-    nets = {}  # (stage blocks, steps) -> {seed: wall s}: one supernet per seed
+    nets = {}  # (depth, steps) -> {seed: wall s}: one supernet per seed
     for r in ok:
         if "supernet" in r:
             n = r["supernet"]
-            nets.setdefault((tuple(n["stage_blocks"]), n["steps"]), {})[r.get("seed", 0)] = n["wall_s"]
+            depth = next(tuple(v) for k, v in n.items() if k not in ("steps", "wall_s", "cpu_s"))  # e.g. stage_blocks
+            nets.setdefault((depth, n["steps"]), {})[r.get("seed", 0)] = n["wall_s"]
     for (blocks, steps), walls in nets.items():
         times = ", ".join(f"{walls[s]:.0f} s" for s in sorted(walls))
         line += f"; supernet {blocks} trained {steps} steps in {times}" + (
@@ -154,7 +156,7 @@ def provenance(records: list[dict], meta: dict) -> str:
     return "\n" + line + "\n" + (f"\nCommand: `{meta['command']}`\n" if meta.get("command") else "")
 
 
-def csv_text(table: list[dict], columns: tuple = COLUMNS) -> str:
+def csv_text(table: list[dict], columns: tuple) -> str:
     buf = io.StringIO()
     keys = ["label", "seeds", "failed"] + [k for key, _, _ in columns for k in (key, key + "_sd")]
     writer = csv.DictWriter(buf, keys, extrasaction="ignore")
@@ -204,11 +206,12 @@ def write_reports(run_dir: str | Path) -> dict:
         raise ValueError(f"{run_dir}: no journal records to report")
     meta_path = run_dir / "search.json"
     meta = json.loads(meta_path.read_text()) if meta_path.exists() else {}
-    columns = columns_for(records)
+    metric = protocol(records)
+    columns = metric.columns
     table = rows(records, columns)
     title = meta.get("title", "ablation")
     try:
-        sig = significance.paired_bootstrap(records, meta.get("base_label")) if columns is COLUMNS else None
+        sig = significance.paired_bootstrap(records, meta.get("base_label")) if metric.match_class else None
     except ValueError as err:  # e.g. a resumed journal whose trials saw other frames: the tables still matter
         sig, note = None, f"\nNo bootstrap intervals: {err}\n"
     else:
@@ -216,7 +219,7 @@ def write_reports(run_dir: str | Path) -> dict:
     files = ["report.md", "report.csv", "records.json", "map_vs_gflops.png", "map_vs_latency.png"]
     atomic.write_text(run_dir / "report.md",
                       markdown(table, meta.get("base_label"), title, columns, sig) + note
-                      + (zero_class_note(records) if columns is COLUMNS else "") + provenance(records, meta))
+                      + (zero_class_note(records) if metric.zero_class_note else "") + provenance(records, meta))
     atomic.write_text(run_dir / "report.csv", csv_text(table, columns))
     # the match tables stay in the journal: records.json is for reading
     atomic.write_json(run_dir / "records.json", [{k: v for k, v in r.items() if k != "matches"} for r in records])

@@ -2,11 +2,12 @@
 validated through the zoo before anything trains.
 
 Axes are `FIELD=V1,V2,...` for scalar fields and `FIELD=A|B|...` for tuple fields (each value a
-comma-separated tuple, e.g. `stage_blocks=3,1,6,3|3,6,6,3`). Derived axes:
-  stage{K}_blocks=V1,V2   blocks of stage K (1-4), the rest of stage_blocks kept from the base
-  stem_filters=V1,V2      also sets the FEC's last width to V, as in the paper (FEC 32-128-12 -> stem 12)
-  neck=fpn,pan,mdfen      (RadarNeXt) keeps the DCNv3 positions for mdfen ((4,) when the base has
-                          none) and drops them for fpn/pan, as the paper's three variants do
+comma-separated tuple, e.g. `stage_blocks=3,1,6,3|3,6,6,3`). A family may define derived axes
+(its record's `axes`: name -> fn(base config, overrides, value) -> overrides):
+  DSFEC      stage{K}_blocks=V1,V2   blocks of stage K (1-4), the rest of stage_blocks kept from the base
+             stem_filters=V1,V2      also sets the FEC's last width to V, as in the paper (FEC 32-128-12 -> stem 12)
+  RadarNeXt  neck=fpn,pan,mdfen      keeps the DCNv3 positions for mdfen ((4,) when the base has
+                                     none) and drops them for fpn/pan, as the paper's three variants do
 """
 
 from __future__ import annotations
@@ -44,11 +45,13 @@ def parse_axis(spec: str, base: str) -> Axis:
     field, sep, raw = spec.partition("=")
     if not sep or not raw:
         raise SearchSpaceError(f"--axis {spec!r}: expected FIELD=V1,V2,... (tuple fields: FIELD=A|B)")
-    stage = re.fullmatch(r"stage([1-4])_blocks", field)
-    default = None if stage else getattr(zoo.config(base), field, None)
-    if default is None and not stage and field not in {f.name for f in dataclasses.fields(zoo.config(base))}:
-        valid = sorted(f.name for f in dataclasses.fields(zoo.config(base)))
-        raise SearchSpaceError(f"--axis {spec!r}: unknown field {field!r} of {base!r}; valid: {valid} or stage1..4_blocks")
+    derived = zoo.family_of(base).axes
+    fields = {f.name for f in dataclasses.fields(zoo.config(base))}
+    if field not in fields and field not in derived:
+        raise SearchSpaceError(f"--axis {spec!r}: unknown field {field!r} of {base!r}; valid: {sorted(fields)} "
+                               f"or the derived axes {sorted(derived)}")
+    # a derived axis that is not also a field (stage2_blocks) takes scalar values
+    default = getattr(zoo.config(base), field, None)
     if isinstance(default, tuple):
         values = tuple(tuple(_literal(v) for v in part.split(",")) for part in raw.split("|"))
     else:
@@ -57,22 +60,9 @@ def parse_axis(spec: str, base: str) -> Axis:
 
 
 def apply_axis(base_cfg, overrides: dict, field: str, value) -> dict:
-    """Overrides with one axis value applied, including the derived axes."""
-    out = dict(overrides)
-    stage = re.fullmatch(r"stage([1-4])_blocks", field)
-    if stage:
-        blocks = list(out.get("stage_blocks", base_cfg.stage_blocks))
-        blocks[int(stage.group(1)) - 1] = value
-        out["stage_blocks"] = tuple(blocks)
-    elif field == "stem_filters" and getattr(base_cfg, "encoder", None) == "fec":
-        f1, f2, _ = out.get("fec_filters", base_cfg.fec_filters)
-        out["stem_filters"], out["fec_filters"] = value, (f1, f2, value)
-    elif field == "neck" and hasattr(base_cfg, "dcn_positions"):
-        positions = out.get("dcn_positions", base_cfg.dcn_positions) or (4,)
-        out["neck"], out["dcn_positions"] = value, positions if value == "mdfen" else ()
-    else:
-        out[field] = value
-    return out
+    """Overrides with one axis value applied: the family's derived axis of that name, else the field."""
+    derived = zoo.family_of(base_cfg).axes.get(field)
+    return derived(base_cfg, dict(overrides), value) if derived else {**overrides, field: value}
 
 
 def candidates(base: str, axes: list[Axis], fixed: dict | None = None) -> list[dict]:

@@ -9,8 +9,8 @@ import traceback
 from pathlib import Path
 
 from dsfec_jax import zoo
-from dsfec_jax.data.sources import load_frames
-from dsfec_jax.profile.environment import environment
+from dsfec_jax.data.points.sources import load_frames
+from dsfec_jax.core.environment import environment
 from dsfec_jax.profile.records import profile
 from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.train.fit import fit
@@ -65,24 +65,36 @@ def flat_metrics(scores: dict) -> dict:
     return out
 
 
+def match_classes(family) -> tuple[str, ...]:
+    """The classes whose per-frame matches a trial keeps for the report's bootstrap intervals
+    (the protocol's `match_class`: Car for DSFEC's nuScenes tables; none for VoD)."""
+    return (family.metric.match_class,) if family.metric.match_class else ()
+
+
+def measured(scores: dict, tables: dict, costs: dict) -> dict:
+    """The measured part of a trial record, whichever strategy (train, oneshot) produced it:
+    metrics (per-class groups flattened), the profile's cost columns (and, when an earlier
+    seed's profile was reused, the key it came from), and the match tables for intervals."""
+    out = {"metrics": flat_metrics(scores), "costs": {k: costs[k] for k in COST_COLUMNS}}
+    if "from" in costs:
+        out["costs_from"] = costs["from"]
+    if tables:
+        out["matches"] = significance.matches_entry(tables)
+    return out
+
+
 def measure(trial: dict, trial_dir: Path) -> dict:
     recipe = get_recipe(trial["recipe"], trial["base"])
+    family = zoo.family_of(trial["base"])
     overrides = {**trial["overrides"], **recipe.model_overrides()}
-    columns = zoo.input_columns(trial["base"])
-    frames = load_frames(trial["data"], "train", recipe.train_frames, seed=0, features=columns)
-    val = load_frames(trial["data"], "val", recipe.val_frames, seed=0, features=columns)
-    # DSFEC's nuScenes protocol keeps per-frame Car matches of the final state for the report's intervals
-    dsfec = zoo.config(trial["base"]).family == "dsfec"
+    frames = load_frames(trial["data"], "train", recipe.train_frames, seed=0, features=family.input_columns)
+    val = load_frames(trial["data"], "val", recipe.val_frames, seed=0, features=family.input_columns)
     _, _, scores = fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
                        window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
                        init_variables=initial_variables(trial.get("init", "scratch")),
-                       match_classes=(significance.CLASS,) if dsfec else ())
+                       match_classes=match_classes(family))
     tables = scores.pop("match_tables", {})
     # sizes and latency of the inference form (RadarNeXt: MobileOne branches fused), as the paper counts
     deployed = zoo.Detector(zoo.deploy_config(zoo.config(trial["base"], **trial["overrides"])))
     costs = profile([deployed], timing=True, repeats=recipe.latency_repeats, warmup=1, light=recipe.light_profile)[0]
-    out = {"metrics": flat_metrics(scores),
-           "costs": {k: costs[k] for k in COST_COLUMNS}}
-    if tables:
-        out["matches"] = significance.matches_entry(tables)
-    return out
+    return measured(scores, tables, costs)

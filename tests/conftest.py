@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dsfec_jax import zoo
-from dsfec_jax.grid import Grid
+from dsfec_jax.core.grid import Grid
 
 # Tests rebuild identical networks many times: a per-session persistent compilation cache makes
 # the second compile of the same program a cache hit.

@@ -10,7 +10,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "dsfec_jax"
 # room -> rooms of dsfec_jax it must never import (the "never" lines of the architecture)
 NEVER = {
     "core": {"layers", "boxes", "models", "data", "metrics", "train", "profile", "deploy", "zoo", "predict",
-             "evaluate", "cli", "grid", "atomic", "checkpoint"},
+             "evaluate", "cli"},
     "layers": {"boxes", "models", "data", "metrics", "train", "profile", "deploy", "zoo", "predict", "evaluate",
                "cli"},
     "models": {"data", "train", "deploy", "metrics", "cli"},
@@ -79,3 +79,40 @@ def test_point_column_layouts_are_defined_once():
                 defined.setdefault(tuple(e.value for e in node.elts), []).append(str(path.relative_to(PACKAGE)))
     defined = {k: v for k, v in defined.items() if "dyn_prop" not in k}
     assert all(places == ["core/columns.py"] for places in defined.values()), defined
+
+
+def family_branches(source: str) -> list[str]:
+    """Places in `source` that ask which family they have instead of asking its record:
+    comparing a `family` (name or attribute) with a string, isinstance(..., <Something>Config),
+    and DSFEC's HEAD_NAMES."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Compare):
+            sides = [node.left, *node.comparators]
+            named = any(isinstance(s, ast.Name) and s.id == "family" or isinstance(s, ast.Attribute)
+                        and s.attr in ("family", "name") and "family" in ast.unparse(s) for s in sides)
+            if named and any(isinstance(s, ast.Constant) and isinstance(s.value, str) for s in sides):
+                found.append(f"line {node.lineno}: {ast.unparse(node)}")
+        elif isinstance(node, ast.Call) and ast.unparse(node.func) == "isinstance" and len(node.args) == 2:
+            if ast.unparse(node.args[1]).split(".")[-1].endswith("Config"):
+                found.append(f"line {node.lineno}: {ast.unparse(node)}")
+        elif isinstance(node, (ast.Name, ast.Attribute, ast.alias)):
+            name = node.id if isinstance(node, ast.Name) else node.attr if isinstance(node, ast.Attribute) else node.name
+            if name == "HEAD_NAMES":
+                found.append(f"line {node.lineno}: HEAD_NAMES")
+    return found
+
+
+def test_no_code_outside_models_branches_on_a_family():
+    """Shared code asks the family's record (zoo.family_of(cfg)); only models/ knows families."""
+    roots = [PACKAGE, PACKAGE.parent / "search", PACKAGE.parent / "experiments"]
+    bad = {str(p.relative_to(PACKAGE.parent)): family_branches(p.read_text())
+           for root in roots for p in sorted(root.rglob("*.py")) if "models" not in p.relative_to(root).parts}
+    assert not {k: v for k, v in bad.items() if v}
+
+
+def test_the_family_branch_finder_can_fail():
+    source = ("if cfg.family == 'radarnext':\n    pass\nx = isinstance(c, radarnext.RadarNeXtConfig)\n"
+              "from dsfec_jax.models.dsfec.net import HEAD_NAMES\nok = zoo.family_of(cfg).name != 'dsfec'\n"
+              "fine = zoo.family_of(cfg).metric.name")
+    assert len(family_branches(source)) == 4

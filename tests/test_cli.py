@@ -65,8 +65,8 @@ def test_ship_measures_a_radarnext_run_with_the_vod_protocol(monkeypatch, tmp_pa
     """A RadarNeXt run ships with the VoD 3D AP on the synthetic 4D benchmark (not the nuScenes
     metric) and with the pillar slots the run trained with."""
     from conftest import random_variables
-    from dsfec_jax import checkpoint
-    from dsfec_jax.grid import Grid
+    from dsfec_jax.core import checkpoint
+    from dsfec_jax.core.grid import Grid
 
     grid = Grid((0.0, 10.24), (-5.12, 5.12), (-3.0, 2.0), 0.16)
     det = zoo.create("radarnext_fpn", grid=grid, layer_nums=(1, 1, 1), max_points=4, max_pillars=96)
@@ -116,7 +116,7 @@ def test_non_positive_counts_are_refused_naming_the_flag(argv, flag, capsys):
 
 def test_the_data_commands_refuse_zero_frames(capsys):
     from dsfec_jax.data import __main__ as data_main
-    from dsfec_jax.data.synthetic import __main__ as synthetic_main
+    from dsfec_jax.data.points.synthetic import __main__ as synthetic_main
 
     with pytest.raises(SystemExit):
         data_main.parse(["inspect", "--source", "synthetic", "--frames", "0"])
@@ -137,7 +137,7 @@ def test_bench_refuses_zero_threads(monkeypatch):
 def test_empty_inputs_get_an_error_not_a_number(shared_data, tiny_model, tmp_path):
     """The VoD example set has 3 frames: its 'test' split (85-100 %) holds none. Scoring it, or
     asking for 0 frames, must say so instead of returning a score of nothing."""
-    from dsfec_jax.data.sources import NoFrames, load_frames
+    from dsfec_jax.data.points.sources import NoFrames, load_frames
     from dsfec_jax.train.fit import fit
     from dsfec_jax.train.schedules import get_schedule
 

@@ -7,13 +7,13 @@ from dsfec_jax import zoo
 from dsfec_jax.boxes.decode import decode_heads
 from dsfec_jax.boxes.nms import batched_rotated_nms
 from dsfec_jax.boxes.pixor import cell_centres
-from dsfec_jax.data.pillarize import pillarize
+from dsfec_jax.data.points.pillarize import pillarize
 from dsfec_jax.boxes.structures import Boxes
-from dsfec_jax.data.targets import detector_targets
-from dsfec_jax.grid import Grid
+from dsfec_jax.models.dsfec.targets import detector_targets
+from dsfec_jax.core.grid import Grid
 from dsfec_jax.predict import Predictor
 from conftest import tiny
-from test_train_step import toy_frame
+from builders import toy_frame
 
 GRID = Grid((0.0, 16.0), (-8.0, 8.0), (-2.5, 2.5), 0.5)
 HEADS = {"car": ("car",), "truck": ("truck",), "vru": ("pedestrian", "bicycle")}

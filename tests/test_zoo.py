@@ -127,7 +127,7 @@ def deployed_params(name: str, **overrides) -> int:
     return sum(int(np.prod(x.shape)) for x in jax.tree.leaves(fused["params"]))
 
 
-# README's RadarNeXt rows that tests/test_radarnext.py does not pin exactly: the Dense FPN
+# README's RadarNeXt rows that tests/models/test_radarnext.py does not pin exactly: the Dense FPN
 # (4,856,716, 131 k above the paper) and DCNv3 at position 3 (1.547 M where the paper says 1.630 M).
 @pytest.mark.parametrize("name,overrides,expected", [("radarnext_fpn_dense", {}, 4_856_716),
                                                      ("radarnext_mdfen", {"dcn_positions": (3,)}, 1_547_448)])

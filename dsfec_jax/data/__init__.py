@@ -1,1 +1,2 @@
-"""Frames and where they come from: the schema, synthetic radar, real-format readers, pillarization, targets."""
+"""Frames and where they come from, one sub-room per modality (points/ today), plus what every
+modality shares: batching, path safety and typed JSON records."""

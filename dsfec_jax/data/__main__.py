@@ -11,7 +11,7 @@ import json
 import sys
 
 from ..argtypes import positive_int
-from .inspect import DSFEC_SPEC, SOURCES, format_summary, load, pillarize_rate, summarize
+from .points.inspect import DSFEC_SPEC, SOURCES, format_summary, load, pillarize_rate, summarize
 
 
 def parse(argv=None) -> argparse.Namespace:

@@ -1,4 +1,7 @@
-"""Frames -> training batches (pillar tensors + head targets), as a pure function of the step.
+"""Frames -> training batches (pillar tensors + the family's targets), as a pure function of the step.
+
+The targets come from the detector's family (`targets_fn(boxes, grid)`, Family.targets): this
+module only batches them, so it serves any head.
 
 Batch `s` of a run depends only on (seed, s): the frame order is a permutation per epoch drawn
 from (seed, epoch) and augmentation draws from (seed, s). So a resumed run sees exactly the
@@ -20,11 +23,10 @@ from typing import Callable, Sequence
 import jax
 import numpy as np
 
-from .augment import AugmentConfig, augment
-from ..grid import Grid
-from .frame import Boxes, Frame
-from .pillarize import PillarSpec, pillarize_frames
-from .targets import detector_targets
+from .points.augment import AugmentConfig, augment
+from ..core.grid import Grid
+from .points.frame import Boxes, Frame
+from .points.pillarize import PillarSpec, pillarize_frames
 
 
 TargetsFn = Callable[[Boxes, Grid], dict]
@@ -32,19 +34,15 @@ WINDOW_SAMPLING = ("cycle", "objects")
 OBJECT_WINDOW_SHARE = 0.8  # the rest keeps empty windows in the mix: false alarms are learnt there
 
 
-def collate(frames: list[Frame], spec: PillarSpec, head_classes: dict, stride: int,
-            targets_fn: TargetsFn | None = None, origin_input: bool = False) -> dict:
-    """Pillar tensors and stacked targets; `targets_fn(boxes, grid)` replaces the dense-head
-    targets of `head_classes` (e.g. CenterHead targets). `origin_input` adds inputs['origin'],
-    the window's (x_min, y_min) per sample, for networks that take it as a traced input."""
+def collate(frames: list[Frame], spec: PillarSpec, targets_fn: TargetsFn, origin_input: bool = False) -> dict:
+    """Pillar tensors and the stacked targets `targets_fn(boxes, grid)` of each frame.
+    `origin_input` adds inputs['origin'], the window's (x_min, y_min) per sample, for networks
+    that take it as a traced input."""
     inputs, stats = pillarize_frames(frames, spec)
     if origin_input:
         origin = np.array([spec.grid.x_range[0], spec.grid.y_range[0]], np.float32)
         inputs = {**inputs, "origin": np.tile(origin, (len(frames), 1))}
-    if targets_fn is None:
-        targets = [detector_targets(f.boxes, head_classes, spec.grid, stride) for f in frames]
-    else:
-        targets = [targets_fn(f.boxes, spec.grid) for f in frames]
+    targets = [targets_fn(f.boxes, spec.grid) for f in frames]
     return {"inputs": inputs, "targets": jax.tree.map(lambda *x: np.stack(x), *targets), "stats": stats}
 
 
@@ -67,16 +65,16 @@ def training_windows(grid: Grid, cells: int | None) -> list[Grid]:
 class BatchStream:
     """Batch `s`: frames of (seed, s) pillarized for window `window(s)` of `specs`."""
 
-    def __init__(self, frames: Sequence[Frame], specs: list[PillarSpec] | PillarSpec, head_classes: dict,
-                 stride: int, batch_size: int, seed: int, augment_cfg: AugmentConfig | None = AugmentConfig(),
-                 targets_fn: TargetsFn | None = None, origin_input: bool = False, window_sampling: str = "cycle"):
+    def __init__(self, frames: Sequence[Frame], specs: list[PillarSpec] | PillarSpec, targets_fn: TargetsFn,
+                 batch_size: int, seed: int, augment_cfg: AugmentConfig | None = AugmentConfig(),
+                 origin_input: bool = False, window_sampling: str = "cycle"):
         if len(frames) < batch_size:
             raise ValueError(f"{len(frames)} training frames cannot fill a batch of {batch_size}")
         if window_sampling not in WINDOW_SAMPLING:
             raise ValueError(f"window_sampling must be one of {WINDOW_SAMPLING}, got {window_sampling!r}")
         self.window_sampling = window_sampling
         self.specs = specs if isinstance(specs, list) else [specs]
-        self.frames, self.head_classes, self.stride = frames, head_classes, stride
+        self.frames = frames
         self.batch_size, self.seed, self.augment_cfg = batch_size, seed, augment_cfg
         self.targets_fn, self.origin_input = targets_fn, origin_input
         self.per_epoch = len(frames) // batch_size
@@ -104,5 +102,4 @@ class BatchStream:
         if self.augment_cfg is not None:
             frames = [augment(f, self.augment_cfg, rng) for f in frames]
         window = self.window(step, frames)
-        return {**collate(frames, self.specs[window], self.head_classes, self.stride, self.targets_fn,
-                          self.origin_input), "window": window}
+        return {**collate(frames, self.specs[window], self.targets_fn, self.origin_input), "window": window}

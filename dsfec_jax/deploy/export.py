@@ -18,32 +18,23 @@ from pathlib import Path
 
 import jax
 
-from .. import atomic
-from ..models.center_head import BOX_OUTPUTS
-from ..models.dsfec import HEAD_NAMES
-from ..predict import decoder, head_classes
+from .. import zoo
+from ..core import atomic
 from ..core.provenance import versions
+from ..predict import decoder, head_classes
 
 INPUTS = ("points", "mask", "coords")
 OUTPUTS = ("boxes", "scores", "labels")
-MAP_OUTPUTS = tuple(f"{h}_{k}" for h in HEAD_NAMES for k in ("cls", "box"))  # DSFEC's head maps
-CENTER_MAP_OUTPUTS = tuple(f"center_{k}" for k, _ in BOX_OUTPUTS) + ("center_hm",)  # a CenterHead's (deployed)
 
 
 def map_outputs(cfg) -> tuple[str, ...]:
     """Names of the head maps `with_maps` adds to the outputs (what parity tests compare)."""
-    names = {"dsfec": MAP_OUTPUTS, "radarnext": CENTER_MAP_OUTPUTS}
-    if cfg.family not in names:
-        raise ValueError(f"{cfg.name}: with_maps knows the head maps of families {sorted(names)}, not {cfg.family!r}")
-    return names[cfg.family]
+    return zoo.family_of(cfg).map_outputs(cfg)
 
 
 def head_maps(cfg, maps: dict) -> tuple:
     """The network's outputs in `map_outputs(cfg)` order (a training-only corner map is left out)."""
-    names = map_outputs(cfg)
-    if cfg.family == "radarnext":
-        return tuple(maps[name.removeprefix("center_")] for name in names)
-    return tuple(maps[h][k] for h in HEAD_NAMES for k in ("cls", "box"))
+    return zoo.family_of(cfg).head_maps(cfg, maps)
 
 
 def end_to_end(detector, variables, top_k: int = 100, with_maps: bool = False):
@@ -60,8 +51,6 @@ def end_to_end(detector, variables, top_k: int = 100, with_maps: bool = False):
 
 def grouped(detector):
     """The same network (same parameters) with the grouped depthwise kernel."""
-    from .. import zoo
-
     return zoo.Detector(dataclasses.replace(detector.config, depthwise_impl="grouped"))
 
 
@@ -77,12 +66,10 @@ def onnx_model(fn, specs: list, input_names: list[str], output_names: list[str],
 def export(detector, variables, out_dir: str | Path, top_k: int = 100, batch_size: int = 1,
            with_maps: bool = False, source: dict | None = None) -> dict:
     """Write model.onnx, model.jax_export and deploy.json to out_dir -> {name: path}."""
-    from .. import zoo
-
     out_dir = Path(out_dir)
     detector, variables = zoo.deploy(detector, variables)  # fused form (unchanged for DSFEC)
     det = grouped(detector)
-    outputs = OUTPUTS + (map_outputs(det.config) if with_maps else ())  # an unknown family fails here
+    outputs = OUTPUTS + (map_outputs(det.config) if with_maps else ())
     fn = end_to_end(det, variables, top_k, with_maps)
     specs = [jax.ShapeDtypeStruct(v.shape, v.dtype) for v in (det.dummy_inputs(batch_size)[k] for k in INPUTS)]
     model = onnx_model(fn, specs, INPUTS, outputs, det.name)

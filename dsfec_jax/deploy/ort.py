@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.pillarize import PillarSpec
-from ..grid import Grid
+from ..data.points.pillarize import PillarSpec
+from ..core.grid import Grid
 from ..predict import HostPipeline
 
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import atomic
-from ..data.pillarize import pillarize, select_columns
+from ..core import atomic
+from ..data.points.pillarize import pillarize, select_columns
 from .ort import pillar_spec, read_manifest
 
 QUANTIZED_OPS = ["Conv", "ConvTranspose", "MatMul", "Gemm"]

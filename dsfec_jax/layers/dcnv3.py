@@ -8,8 +8,11 @@ Each output pixel (i, j) samples the projected map bilinearly (zeros outside) at
 
 (s = offset_scale, 2.0 in RadarNeXt: it scales the base grid too; points ordered x-major,
 p = 3 * ix + iy), sums m * sample over the points, and projects with Linear_out. No residual, no
-norm around it. Facts from ../shared/docs/reference-spec.md §1 (InternImage dcnv3_core_pytorch);
-the code is ours.
+norm around it. Facts from InternImage (github OpenGVLab/InternImage,
+classification/ops_dcnv3/functions/dcnv3_func.py, dcnv3_core_pytorch) and the public RadarNeXt code
+(github Pay246-git468/RadarNeXt, commit 72676df, projects/RadarNeXt/radarnext/DeformFFN.py; its
+DeformLayer sets offset_scale 2.0). The sampling formula is our derivation from the reference
+points and grid_sample (align_corners=False). The code is ours.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ from __future__ import annotations
 import flax.linen as nn
 import jax.numpy as jnp
 
-from ..grid import Grid
+from ..core.grid import Grid
 from .activations import activation
 from .conv import PointLinear, batch_norm
 from .fec import FEC

@@ -20,9 +20,9 @@
 
 Frames are dicts: names (N,), boxes (N, 7) as (x, y, z centre, w, l, h, yaw) in the sensor frame,
 detections also scores (N,); optional: cam_from_sensor (4, 4) sensor -> rectified camera,
-bbox_height (N,), P2 (3, 4) and image_size (width, height). Facts from
-../shared/docs/reference-spec.md §1 and tudelft-iv/view-of-delft-dataset
-vod/evaluation/kitti_official_evaluate.py; the code is ours.
+bbox_height (N,), P2 (3, 4) and image_size (width, height). Facts from the VoD devkit
+(github tudelft-iv/view-of-delft-dataset, vod/evaluation/kitti_official_evaluate.py and
+evaluate.py); the code is ours.
 """
 
 from __future__ import annotations

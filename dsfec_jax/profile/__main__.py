@@ -30,7 +30,7 @@ def set_threads(threads: int | None) -> None:
     """Pin the process to `threads` CPUs before XLA starts (it sizes its pool then; threads.py)."""
     if threads is None:
         return
-    from .threads import pin  # no jax import: safe before jax starts
+    from ..core.threads import pin
 
     try:
         pin(threads)
@@ -57,7 +57,8 @@ def human(records: list[dict]) -> str:
 def main(argv=None) -> int:
     args = parse(argv)
     set_threads(args.threads)
-    from .. import atomic, zoo
+    from ..core import atomic
+    from .. import zoo
     from . import compare, records, zoo_table
 
     names = [n.strip() for n in args.models.split(",") if n.strip()]

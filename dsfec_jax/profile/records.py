@@ -6,7 +6,7 @@ import jax
 
 from .. import zoo
 from . import counting, latency, memory
-from .environment import environment
+from ..core.environment import environment
 
 
 def size_record(detector, xla: bool = True) -> dict:
@@ -19,7 +19,7 @@ def size_record(detector, xla: bool = True) -> dict:
     cfg = detector.config
     record = {
         "model": cfg.name,
-        "family": cfg.family,
+        "family": zoo.family_of(cfg).name,
         "input": {k: list(v.shape) for k, v in inputs.items()},
         "params": params["total"],
         "params_per_stage": params["per_stage"],

@@ -6,7 +6,8 @@ import json
 import re
 from pathlib import Path
 
-from .. import atomic, zoo
+from ..core import atomic
+from .. import zoo
 
 START, END = "<!-- zoo-table:start -->", "<!-- zoo-table:end -->"
 

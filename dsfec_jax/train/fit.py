@@ -8,14 +8,12 @@ from pathlib import Path
 from typing import Sequence
 
 from .. import zoo
-from ..data.augment import AugmentConfig
+from ..data.points.augment import AugmentConfig
 from ..data.batches import BatchStream, training_windows
-from ..data.frame import Frame
-from ..data.pillarize import PillarSpec
-from ..data.center_targets import center_head_targets
-from ..evaluate import evaluate, evaluate_vod
-from ..models.dsfec import HEAD_NAMES
-from ..predict import Predictor, predictor_for
+from ..data.points.frame import Frame
+from ..data.points.pillarize import PillarSpec
+from ..evaluate import validate as run_validation
+from ..predict import Predictor
 from ..core.provenance import jsonable, versions
 from .loop import RunSpec, train
 from .schedules import Schedule
@@ -46,16 +44,15 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     _check_counts({"training frames": len(frames), "validation frames": len(val), "steps": steps})
     det = zoo.create(model, **overrides)
     cfg = det.config
+    family = zoo.family_of(cfg)
     windows = [zoo.create(model, **{**overrides, "grid": g}) for g in training_windows(cfg.grid, window)]
-    center = cfg.family == "radarnext"
-    heads = {} if center else dict(zip(HEAD_NAMES, cfg.head_classes))
-    targets_fn = (lambda boxes, grid: center_head_targets(boxes, tuple(cfg.classes), grid, cfg.output_stride)) \
-        if center else None
-    # RadarNeXt takes each window's origin as an input, so one compiled step serves all windows
-    # (its 0.16 m grid needs 16 windows of 96 cells); DSFEC compiles one step per window.
-    stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], heads, cfg.output_stride,
-                         schedule.batch_size, seed, AugmentConfig() if augment else None, targets_fn,
-                         origin_input=center, window_sampling=window_sampling)
+    # A family whose network takes each window's origin as an input (RadarNeXt) trains every
+    # window with one compiled step (its 0.16 m grid needs 16 windows of 96 cells); the others
+    # (DSFEC) compile one step per window.
+    origin = family.origin_input
+    stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.targets(cfg),
+                         schedule.batch_size, seed, AugmentConfig() if augment else None,
+                         origin_input=origin, window_sampling=window_sampling)
     total = steps or schedule.total_steps(len(frames))
     spec = RunSpec(Path(run_dir), schedule, seed, total_steps=total, progress=progress)
     info = {**(run_info or {}), "model": model, "overrides": jsonable(overrides),
@@ -66,17 +63,15 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
 
     last_tables = {}  # the match tables of the latest validation, which the returned headline is
 
-    def validate(state):  # headline figures plus every class's mAP and AP@4 (small enough to log)
-        if center:  # the View-of-Delft 3D AP
-            return evaluate_vod(predictor_for(det, state_variables(state)), val)
-        result = evaluate(Predictor(det, state_variables(state)), val, match_classes=match_classes)
-        m = result.pop("metrics")
-        last_tables.update(m.get("match_tables", {}))
-        return {**result, "class_mAP": m["class_mAP"], "AP@4": m.get("AP@4", {})}
+    def validate(state):  # the family's protocol: headline figures plus per-class ones (small enough to log)
+        scores, tables = run_validation(family.metric.name, Predictor(det, state_variables(state)), val,
+                                        match_classes)
+        last_tables.update(tables)
+        return scores
 
     # with origin inputs one network shaped like a window (windows[0]) trains on every window
-    state, scores = train(windows[0] if center else det, stream, spec, info, validate, eval_every or total,
-                          window_detectors=None if center else windows,
-                          init_variables=init_variables, best_key="mAP" if center else "car_mAP")
+    state, scores = train(windows[0] if origin else det, stream, spec, info, validate, eval_every or total,
+                          window_detectors=None if origin else windows,
+                          init_variables=init_variables, best_key=family.metric.headline)
     scores = scores if scores is not None else validate(state)
     return det, state, {**scores, "match_tables": dict(last_tables)} if last_tables else scores

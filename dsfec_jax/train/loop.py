@@ -9,7 +9,7 @@ RUN_DIR/
   checkpoints/best.msgpack (+ .json)           the state with the best validation score
 
 A kill at any point leaves a resumable directory: checkpoints are written as one unit (see
-dsfec_jax.checkpoint; an incomplete one is skipped for the previous), a torn last metrics line is
+dsfec_jax.core.checkpoint; an incomplete one is skipped for the previous), a torn last metrics line is
 dropped.
 """
 
@@ -28,9 +28,8 @@ import jax
 import numpy as np
 from tqdm import tqdm
 
-from .. import atomic, checkpoint
+from ..core import atomic, checkpoint
 from ..data.batches import BatchStream
-from .losses import LossConfig
 from .schedules import Schedule, optimizer
 from .step import init_state, make_train_step
 
@@ -60,7 +59,6 @@ class RunSpec:
     log_every: int = 10
     ckpt_every: int = 100
     keep: int = 3
-    loss: LossConfig = LossConfig()
     progress: bool = True
 
 
@@ -175,7 +173,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     _record_start(spec.run_dir, run_info, previous, start)
     log_path = spec.run_dir / "metrics.jsonl"
     _trim_metrics(log_path, start)
-    step_fns = [make_train_step(d, tx, spec.loss) for d in (window_detectors or [detector])]
+    step_fns = [make_train_step(d, tx) for d in (window_detectors or [detector])]
     end = spec.total_steps if spec.stop_at is None else min(spec.stop_at, spec.total_steps)
     best = _best_score(spec.run_dir, best_key)
     scores = None

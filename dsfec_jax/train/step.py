@@ -10,8 +10,7 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from .center_losses import center_head_loss
-from .losses import LossConfig, detection_loss
+from .. import zoo
 from .warm_start import warm_start
 
 
@@ -26,30 +25,32 @@ def init_state(detector, tx: optax.GradientTransformation, rng: jax.Array,
             "opt_state": tx.init(variables["params"]), "step": jnp.zeros((), jnp.int32)}
 
 
-def family_loss(detector, loss_cfg: LossConfig = LossConfig()):
-    """(outputs, targets) -> (loss, parts) for the detector's head: dense PIXOR heads or CenterHead."""
-    if detector.config.family == "radarnext":
-        return lambda outputs, targets: center_head_loss(outputs, targets, detector.config)
-    return lambda outputs, targets: detection_loss(outputs, targets, loss_cfg)
+def train_step_fn(detector, tx: optax.GradientTransformation, extra_inputs: tuple[str, ...] = ()):
+    """The un-jitted step (state, batch, *extra) -> (new state, {'loss', 'grad_norm', parts...}) with
+    the family's loss. `extra_inputs` name traced network inputs passed after the batch (the
+    one-shot supernet's `depth`), so one compiled step serves every value of them."""
+    compute_loss = zoo.family_of(detector.config).loss(detector.config)
 
-
-def make_train_step(detector, tx: optax.GradientTransformation, loss_cfg: LossConfig = LossConfig()):
-    compute_loss = family_loss(detector, loss_cfg)
-
-    def loss_fn(params, batch_stats, batch):
+    def loss_fn(params, batch_stats, batch, extra):
         variables = {"params": params, "batch_stats": batch_stats}
-        outputs, updates = detector.apply(variables, batch["inputs"], train=True)
+        outputs, updates = detector.apply(variables, {**batch["inputs"], **extra}, train=True)
         loss, parts = compute_loss(outputs, batch["targets"])
         return loss, (parts, updates["batch_stats"])
 
-    def train_step(state: dict, batch: dict):
+    def train_step(state: dict, batch: dict, *extra_values):
+        extra = dict(zip(extra_inputs, extra_values))
         grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
-        (loss, (parts, batch_stats)), grads = grad_fn(state["params"], state["batch_stats"], batch)
+        (loss, (parts, batch_stats)), grads = grad_fn(state["params"], state["batch_stats"], batch, extra)
         updates, opt_state = tx.update(grads, state["opt_state"], state["params"])
         new_state = {"params": optax.apply_updates(state["params"], updates), "batch_stats": batch_stats,
                      "opt_state": opt_state, "step": state["step"] + 1}
         metrics = {"loss": loss, "grad_norm": optax.tree.norm(grads), **parts}
         return new_state, metrics
 
-    return jax.jit(train_step, donate_argnums=0)
+    return train_step
+
+
+def make_train_step(detector, tx: optax.GradientTransformation):
+    """The jitted step (state, batch) -> (state, metrics), state donated."""
+    return jax.jit(train_step_fn(detector, tx), donate_argnums=0)
 

@@ -1,0 +1,63 @@
+"""What `dsfec bench` shows: the markdown table, the ratios worth quoting, the stacked-bar plot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .timing import STAGES
+
+
+def ratios(records: list[dict]) -> list[str]:
+    """The figures to quote: DSFEC-S / Baseline per runtime, JAX / ONNX Runtime per model."""
+    by = {(r["model"], r["runtime"], r["threads"]): r["total_ms"] for r in records}
+    lines = []
+    for (m, rt, t), ms in sorted(by.items()):
+        if m == "dsfec_s" and ("baseline", rt, t) in by:
+            lines.append(f"DSFEC-S / Baseline ({rt}, {t} thread{'s' * (t > 1)}): {ms / by[('baseline', rt, t)]:.3f}")
+        if rt == "jax" and (m, "onnx", t) in by:
+            lines.append(f"JAX / ONNX Runtime ({m}, {t} thread{'s' * (t > 1)}): {ms / by[(m, 'onnx', t)]:.3f}")
+    return lines
+
+
+def markdown(records: list[dict]) -> str:
+    head = ["model", "runtime", "threads"] + [f"{s} ms" for s in STAGES] + ["total ms (p90)", "frames/s (batch 1)",
+                                                                           "JAX frames/s by batch"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in records:
+        tp = r.get("throughput_fps")
+        tp_text = ", ".join(f"{b}: {v}" for b, v in tp.items()) if tp else "-"
+        lines.append("| " + " | ".join([r["model"], r["runtime"], str(r["threads"])]
+                                       + [f"{r['stages_ms'][s]:.2f}" for s in STAGES]
+                                       + [f"{r['total_ms']:.1f} ({r['total_p90_ms']:.1f})", f"{r['fps_batch1']:.1f}",
+                                          tp_text]) + " |")
+    env = records[0]
+    return "\n".join(lines + [""] + ratios(records) + ["", f"CPU: {env['cpu']}; versions: {env['versions']}"]) + "\n"
+
+
+def plot(records: list[dict], path: Path) -> None:
+    import io
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ...core import atomic
+
+    labels = [f"{r['model']}\n{r['runtime']} x{r['threads']}" for r in records]
+    fig, ax = plt.subplots(figsize=(max(6, 0.7 * len(records)), 4.2), dpi=120)
+    bottom = np.zeros(len(records))
+    for stage in STAGES:
+        vals = np.array([r["stages_ms"][stage] for r in records])
+        ax.bar(labels, vals, bottom=bottom, label=stage)
+        bottom += vals
+    ax.set_ylabel("ms, batch 1 (median)")
+    ax.set_title("raw points -> boxes, per stage")
+    ax.legend(fontsize=7)
+    ax.tick_params(axis="x", labelsize=6)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    atomic.write_bytes(path, buf.getvalue())

@@ -1,0 +1,47 @@
+"""Interleaved timing of the chains, raw points to boxes, one call per stage.
+
+Stages: pillarize (host numpy), network (pillar net .. heads), decode (sigmoid, PIXOR decode,
+top-k per head), nms (host, rotated, per class). Every runtime runs the same chain of four calls on
+the same frame; within each repeat the models and runtimes alternate (A B C A B C ...) rather than
+running one after the other, so a slow spell of a noisy shared machine hits them all alike and
+their ratios hold.
+"""
+
+from __future__ import annotations
+
+import time
+
+STAGES = ("pillarize", "network", "decode", "nms")
+
+
+def chain(points, spec, stages: dict, predictor) -> list:
+    """[(stage, fn(previous output) -> output)] from raw points to Detections."""
+    from ...data.points.pillarize import pillarize
+
+    return [("pillarize", lambda _: {k: v[None] for k, v in pillarize(points, spec)[0].items()}),
+            ("network", stages["network"]), ("decode", stages["decode"]),
+            ("nms", lambda out: predictor._postprocess(out[0][0], out[1][0], out[2][0]))]
+
+
+def time_chains(chains: dict, repeats: int, warmup: int) -> dict:
+    """Interleaved timing: key -> stage -> list of ms (plus 'total')."""
+    def run(steps, sink=None):
+        x, total = None, 0.0
+        for stage, fn in steps:
+            t0 = time.perf_counter()
+            x = fn(x)
+            ms = 1e3 * (time.perf_counter() - t0)
+            total += ms
+            if sink is not None:
+                sink[stage].append(ms)
+        if sink is not None:
+            sink["total"].append(total)
+
+    for steps in chains.values():
+        for _ in range(warmup):
+            run(steps)
+    samples = {k: {s: [] for s in STAGES + ("total",)} for k in chains}
+    for _ in range(repeats):
+        for key, steps in chains.items():
+            run(steps, samples[key])
+    return samples

@@ -1,0 +1,103 @@
+"""One worker process per thread count, and `run`, which launches them and gathers their records.
+
+XLA has no thread-count flag and sizes its pool from the CPUs it may use when it starts, so each
+--threads value N runs in its own worker process (`python -m dsfec_jax.deploy.bench`) pinned to N
+CPUs before XLA starts (core/threads.py); ONNX Runtime gets intra_op_num_threads=N. Within a worker
+every (model, runtime) chain is timed in one interleaved loop (timing.py).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ...core import threads as thread_control
+from .model_setup import model_setup
+from .stages import jax_stages, jax_throughput, onnx_graphs, ort_stages
+from .timing import STAGES, chain, time_chains
+
+
+def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, warmup: int) -> list[dict]:
+    """One process, one thread count: every (model, runtime) chain timed in one interleaved loop."""
+    from ...core.environment import cpu_model, xla_threads
+    from ...core.provenance import versions
+    from ...data.points.pillarize import PillarSpec
+    from ...data.points.sources import load_frames
+
+    calib = None
+    chains, extra = {}, {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in models:
+            det, variables, label, points, predictor = model_setup(name)
+            spec = PillarSpec.of(det.config)
+            for rt in runtimes:
+                if rt == "jax":
+                    stages = jax_stages(det, variables, predictor)
+                else:
+                    if rt == "onnx-int8" and calib is None:
+                        from ...data.points.pillarize import select_columns
+                        calib = [select_columns(f, det.config.point_features)
+                                 for f in load_frames("synthetic", "train", 32, seed=0)]
+                    stages = ort_stages(onnx_graphs(det, variables, predictor, Path(tmp), rt == "onnx-int8", calib or []),
+                                        threads)
+                chains[(name, rt)] = chain(points, spec, stages, predictor)
+                extra[(name, rt)] = {"weights": label, "points": int(len(points))}
+            if "jax" in runtimes:
+                extra[(name, "jax")]["throughput_fps"] = jax_throughput(det, variables, predictor, repeats)
+        samples = time_chains(chains, repeats, warmup)
+    # threads: the count asked for; xla_threads: XLA's pool as observed after the runs (the truth)
+    env = {"cpu": cpu_model(), "threads": threads, "xla_threads": xla_threads(),
+           "cpu_affinity": thread_control.available_cpus(), "versions": versions(
+        ("jax", "jaxlib", "flax", "numpy", "onnxruntime", "jax2onnx", "dsfec_jax"))}
+    records = []
+    for (name, rt), s in samples.items():
+        med = {k: round(float(np.median(v)), 3) for k, v in s.items()}
+        records.append({"model": name, "runtime": rt, "threads": threads,
+                        "stages_ms": {k: med[k] for k in STAGES}, "total_ms": med["total"],
+                        "total_p90_ms": round(float(np.percentile(s["total"], 90)), 3),
+                        "fps_batch1": round(1e3 / med["total"], 2), "repeats": repeats, "warmup": warmup,
+                        **extra[(name, rt)], **env})
+    return records
+
+
+def run(models: list[str], runtimes: list[str], threads: list[int], repeats: int = 20, warmup: int = 3) -> list[dict]:
+    """Each thread count in a worker process pinned to that many CPUs (XLA's pool is fixed at
+    start-up) -> all records."""
+    for t in threads:  # refuse a count the machine cannot give before any worker starts
+        thread_control.check(t)
+    records = []
+    for t in threads:
+        with tempfile.TemporaryDirectory() as tmp:
+            out = Path(tmp) / "records.json"
+            cmd = [sys.executable, "-m", "dsfec_jax.deploy.bench", "--models", ",".join(models),
+                   "--runtimes", ",".join(runtimes), "--threads", str(t), "--repeats", str(repeats),
+                   "--warmup", str(warmup), "--records-out", str(out)]
+            env = {**os.environ, "OMP_NUM_THREADS": str(t)}
+            proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
+            if proc.returncode != 0:
+                raise RuntimeError(f"bench worker (threads={t}) failed:\n{proc.stderr[-3000:]}")
+            records += json.loads(out.read_text())
+    return records
+
+
+def main(argv=None) -> int:  # the worker entry point (__main__.py); users run `dsfec bench`
+    import argparse
+
+    p = argparse.ArgumentParser(prog="python -m dsfec_jax.deploy.bench")
+    p.add_argument("--models", required=True)
+    p.add_argument("--runtimes", required=True)
+    p.add_argument("--threads", type=int, required=True)
+    p.add_argument("--repeats", type=int, default=20)
+    p.add_argument("--warmup", type=int, default=3)
+    p.add_argument("--records-out", required=True)
+    a = p.parse_args(argv)
+    thread_control.pin(a.threads)  # before the first jax computation: XLA sizes its pool from it
+    records = worker(a.models.split(","), a.runtimes.split(","), a.threads, a.repeats, a.warmup)
+    Path(a.records_out).write_text(json.dumps(records))
+    return 0

@@ -1,0 +1,113 @@
+"""What a detector family is, as one record: shared code (training, prediction, export, search,
+reports) asks the family of a config for what differs, and never compares family names.
+
+A family lives in its own folder (`models/<family>/`: net, heads, variants, targets, loss, paper
+numbers and `family.py` with its `FAMILY` record); `zoo.FAMILIES` lists the records. Adding a
+family is that folder plus one line in `zoo.FAMILIES`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, Mapping
+
+# A report column: (record key, column title, digits). The first column is the headline.
+Column = tuple[str, str, int]
+
+
+@dataclasses.dataclass(frozen=True)
+class MetricProtocol:
+    """How a family's detections are scored, and how its results are reported.
+
+    `name` picks the metric in `dsfec_jax.evaluate.PROTOCOLS` (metrics never import models, so the
+    record names the metric rather than holding it). `headline` is the key that ranks candidates
+    and keeps the best checkpoint; `columns` lay out its ablation tables; `keep` is what a weights
+    manifest records of a validation; `match_class`, if set, is the class whose per-frame matches a
+    sweep keeps for bootstrap intervals, and `zero_class_note` names classes scoring 0 everywhere."""
+
+    name: str
+    headline: str
+    columns: tuple[Column, ...]
+    keep: tuple[str, ...]
+    match_class: str | None = None
+    zero_class_note: bool = False
+
+
+@dataclasses.dataclass(frozen=True)
+class Supernet:
+    """Weight sharing over one depth axis (search.oneshot): the subnet of `depth` (ints, one per
+    stage; may be traced) runs the first depth[s] blocks of stage s. `field` is the config field
+    the candidates differ in; `blocks(cfg)` maps each top-level module of the supernet that a
+    subnet may leave idle to its (stage, block) indices; the network takes `depth` as an input
+    named `input`. `bn_momentum` is the family's batch-norm momentum (for recalibration)."""
+
+    field: str
+    blocks: Callable[[Any], Mapping[str, tuple[int, int]]]
+    bn_momentum: float
+    input: str = "depth"
+
+
+@dataclasses.dataclass(frozen=True)
+class SearchRecipe:
+    """How much a search trial of this family trains and where it is measured (search.recipes
+    turns it into a Recipe). `schedule` names a train.schedules preset; `schedule_changes`
+    override its fields; `grid` None keeps the model's own grid; `window` None trains on the
+    whole (recipe) grid; `supernet_steps` None means the schedule's length."""
+
+    schedule: str
+    schedule_changes: Mapping[str, Any]
+    train_frames: int
+    val_frames: int
+    grid: Any
+    max_pillars: int
+    window: int | None
+    latency_repeats: int
+    supernet_steps: int | None
+    light_profile: bool
+    warm_start: bool = False
+
+
+@dataclasses.dataclass(frozen=True)
+class Family:
+    """Everything that differs between detector families.
+
+    Config and variants: `config_class`, `variants` (name -> frozen config).
+    Data: `input_columns` ("dsfec": every source mapped onto nuScenes' columns; "native": a
+    source's own), `benchmark` (the embedded synthetic source its commands default to),
+    `targets(cfg)` -> fn(boxes, grid) -> one frame's target maps, `origin_input` (the network
+    takes each training window's origin as an input, so one compiled step serves every window).
+    Training: `loss(cfg)` -> fn(outputs, targets) -> (loss, parts).
+    Inference: `head_classes(cfg)` -> {head: classes}; `decoder(cfg, top_k)` -> fn(head outputs)
+    -> (boxes, scores, labels) before NMS (boxes: 5 BEV or 7 3D columns); `predictor` (defaults
+    of the host pipeline: top_k, nms_iou, max_boxes). Deploy: `deploy_config` / `deploy_variables`
+    (the inference form; identity when there is none), `map_outputs(cfg)` (names of the head maps
+    an export adds) and `head_maps(cfg, outputs)` (those maps, in that order).
+    Measurement: `metric` (MetricProtocol), `stem_memory(cfg, variables)` (a paper's memory
+    convention, or None). Search: `recipes` (name -> SearchRecipe), `axes` (derived search axes:
+    name -> fn(base_cfg, overrides, value) -> overrides), `supernet` (or None)."""
+
+    name: str
+    config_class: type
+    variants: Mapping[str, Any]
+    input_columns: str
+    benchmark: str
+    targets: Callable[[Any], Callable]
+    origin_input: bool
+    loss: Callable[[Any], Callable]
+    head_classes: Callable[[Any], dict]
+    decoder: Callable[[Any, int], Callable]
+    predictor: Mapping[str, Any]
+    map_outputs: Callable[[Any], tuple[str, ...]]
+    head_maps: Callable[[Any, Any], tuple]
+    metric: MetricProtocol
+    recipes: Mapping[str, SearchRecipe]
+    axes: Mapping[str, Callable] = dataclasses.field(default_factory=dict)
+    supernet: Supernet | None = None
+    deploy_config: Callable[[Any], Any] = lambda cfg: cfg
+    deploy_variables: Callable[[Any, dict], dict] = lambda cfg, variables: variables
+    stem_memory: Callable[[Any, dict], float] | None = None
+
+    def __post_init__(self):
+        wrong = [n for n, cfg in self.variants.items() if not isinstance(cfg, self.config_class)]
+        if wrong:
+            raise TypeError(f"family {self.name!r}: variants {wrong} are not {self.config_class.__name__}")

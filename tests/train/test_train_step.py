@@ -1,0 +1,58 @@
+import jax
+import numpy as np
+import pytest
+
+from dsfec_jax.data.points.pillarize import PillarSpec, pillarize_frames
+from dsfec_jax.models.dsfec.targets import detector_targets
+from dsfec_jax.models.dsfec.net import HEAD_NAMES
+from dsfec_jax.models.dsfec.loss import LossConfig, detection_loss, sigmoid_focal_loss, smooth_l1
+from dsfec_jax.train.schedules import get_schedule, learning_rate, optimizer
+from dsfec_jax.train.step import init_state, make_train_step
+from conftest import tiny
+from builders import toy_frame
+
+
+def toy_batch(det, n=2):
+    cfg = det.config
+    frames = [toy_frame(np.random.default_rng(i), cfg.grid) for i in range(n)]
+    inputs, _ = pillarize_frames(frames, PillarSpec.of(cfg))
+    heads = dict(zip(HEAD_NAMES, cfg.head_classes))
+    targets = [detector_targets(f.boxes, heads, cfg.grid, cfg.output_stride) for f in frames]
+    targets = jax.tree.map(lambda *x: np.stack(x), *targets)
+    return {"inputs": inputs, "targets": targets}
+
+
+def test_focal_and_smooth_l1_values():
+    assert float(sigmoid_focal_loss(np.array(0.0), np.array(1.0), 0.25, 2.0)) == pytest.approx(0.25 * 0.25 * np.log(2))
+    np.testing.assert_allclose(smooth_l1(np.array([0.05, 1.0]), 0.1), [0.0125, 0.95], rtol=1e-6)
+
+
+def test_a_few_steps_lower_the_loss():
+    det = tiny("dsfec_s")
+    batch = toy_batch(det)
+    sched = get_schedule("quick", warmup_steps=1, learning_rate=3e-3)
+    tx = optimizer(sched, 20)
+    state = init_state(det, tx, jax.random.key(0))
+    step = make_train_step(det, tx)
+    losses = []
+    for _ in range(20):
+        state, metrics = step(state, batch)
+        losses.append(float(metrics["loss"]))
+    assert np.isfinite(losses).all()
+    assert np.mean(losses[-3:]) < 0.5 * losses[0], losses
+
+
+def test_targets_give_a_finite_loss_for_all_heads():
+    det = tiny("baseline")
+    batch = toy_batch(det, 1)
+    variables = det.init(jax.random.key(0))
+    loss, parts = detection_loss(det.apply(variables, batch["inputs"]), batch["targets"], LossConfig())
+    assert np.isfinite(float(loss)) and set(parts) == {f"{h}/{k}" for h in HEAD_NAMES for k in ("cls", "box")}
+
+
+def test_paper_schedule_warms_up_then_decays():
+    s = get_schedule("paper")
+    assert (s.learning_rate, s.warmup_steps, s.batch_size, s.epochs, s.weight_decay, s.b1) == (0.00348, 400, 24, 30, 0.01, 0.9)
+    lr = learning_rate(s, 9000)
+    assert float(lr(0)) < float(lr(200)) < float(lr(400)) == pytest.approx(0.00348)
+    assert float(lr(7000)) == pytest.approx(0.000348) and float(lr(8500)) == pytest.approx(0.0000348)
