@@ -88,7 +88,7 @@ def _kitti_frame(boxes, scores=None, **camera) -> dict:
 def _camera(frame: Frame) -> dict:
     """The camera facts VoD's protocol needs: cam_from_sensor for the corridor (the frame's calibration;
     frames without one, i.e. the VoD-like synthetic 4D benchmark, get VoD's nominal radar -> camera
-    transform, data.kitti.VOD_RADAR_TO_CAMERA), and for VoD frames P2 and the image size, with which
+    transform, data.points.kitti.VOD_RADAR_TO_CAMERA), and for VoD frames P2 and the image size, with which
     detections' 3D boxes are projected for the 40 px rule."""
     calib = frame.meta.get("calib")
     if calib is None:
@@ -105,7 +105,7 @@ def _label_heights(frame: Frame) -> np.ndarray:
     if len(labels) != len(frame.boxes):
         raise ValueError(f"frame {frame.frame_id!r}: meta['kitti_labels'] has {len(labels)} rows for "
                          f"{len(frame.boxes)} boxes; expected them aligned (select both, as "
-                         f"data.sources.canonical_classes does)")
+                         f"data.points.sources.canonical_classes does)")
     return labels.bbox[:, 3] - labels.bbox[:, 1]
 
 

@@ -267,7 +267,7 @@ def test_oneshot_refuses_non_depth_axes():
     from search.oneshot import supernet_overrides
 
     with pytest.raises(SearchSpaceError, match="stage_blocks and nothing else"):
-        supernet_overrides([{"overrides": {"stem_filters": 8}}, {"overrides": {"stem_filters": 12}}])
+        supernet_overrides([{"overrides": {"stem_filters": 8}}, {"overrides": {"stem_filters": 12}}], "stage_blocks")
 
 
 def test_kendall_tau_and_compare(tmp_path, monkeypatch):

@@ -23,7 +23,7 @@ from ..pillar_inputs import random_pillar_inputs
 from .necks import DCN_POSITIONS, SECONDFPN, PANeck
 
 # The public config's heatmap order (Pedestrian, Cyclist, Car) in the project's canonical class
-# names: VoD's "Cyclist" (a bicycle with its rider) is "bicycle" here, as in data.sources.KITTI_CLASS_MAP.
+# names: VoD's "Cyclist" (a bicycle with its rider) is "bicycle" here, as in data.points.sources.KITTI_CLASS_MAP.
 VOD_CLASSES = ("pedestrian", "bicycle", "car")
 # TJ4DRadSet: its own 8 columns, a 69.12 m x 69.12 m grid (432 x 432) and Truck as a fourth class
 TJ4D_CLASSES = ("pedestrian", "bicycle", "car", "truck")
