@@ -17,6 +17,8 @@ from pathlib import Path
 from .argtypes import non_negative_int, positive_int
 from .core.defaults import RUN_PILLARS
 
+INFER_BENCH_MODELS = "baseline,dsfec_l,dsfec_m,dsfec_s"
+TRAIN_BENCH_MODELS = "dsfec_s,dsfec_l,radarnext_fpn"  # the issue-20 acceptance models; 'all' for every variant
 
 
 def parse_overrides(items: list[str]) -> dict:
@@ -86,14 +88,27 @@ def parse(argv=None) -> argparse.Namespace:
     qz.add_argument("--seed", type=int, default=0)
     qz.add_argument("--calibration", default="minmax", choices=("minmax", "percentile", "entropy"),
                     help="how activation ranges are set from the calibration frames")
-    b = sub.add_parser("bench", help="batch-1 latency from raw points to boxes per stage, runtime and thread count")
-    b.add_argument("--models", default="baseline,dsfec_l,dsfec_m,dsfec_s")
+    b = sub.add_parser("bench", help="batch-1 latency from raw points to boxes per stage, runtime and thread count; "
+                                      "--train: training throughput (frames/s, fwd + bwd, GFLOP/s, breakdown)")
+    b.add_argument("--models", default=None,
+                   help=f"comma-separated zoo names (default {INFER_BENCH_MODELS}); with --train also 'all' "
+                        f"(every registered variant), default {TRAIN_BENCH_MODELS}")
     b.add_argument("--runtimes", default="jax,onnx,onnx-int8")
-    b.add_argument("--threads", default="1", help="comma-separated thread counts, e.g. 1,2")
-    b.add_argument("--repeats", type=positive_int, default=20)
-    b.add_argument("--warmup", type=non_negative_int, default=3)
-    b.add_argument("--out", default=None, help="write bench.json, bench.md and bench.png here")
+    b.add_argument("--threads", default=None, help="comma-separated thread counts, e.g. 1,2 (default: 1; with --train 2)")
+    b.add_argument("--repeats", type=positive_int, default=None, help="timed repetitions (default: 20; with --train 10)")
+    b.add_argument("--warmup", type=non_negative_int, default=None, help="untimed repetitions first (default: 3; with --train 2)")
+    b.add_argument("--out", default=None, help="write bench.json, bench.md and bench.png here; with --train: the JSON "
+                                               "record file (default dsfec_jax/profile/records/train_bench.json)")
     b.add_argument("--json", action="store_true", help="print the records as JSON")
+    b.add_argument("--train", action="store_true", help="measure the train step instead (dsfec_jax.profile.training)")
+    b.add_argument("--batch", type=positive_int, default=None, help="--train: frames per step (default 8)")
+    b.add_argument("--window", type=non_negative_int, default=None,
+                   help="--train: training-window cells, 0 = the whole grid (default 96)")
+    b.add_argument("--max-pillars", type=positive_int, default=None, help=f"--train: pillar slots (default {RUN_PILLARS})")
+    b.add_argument("--compare", default=None, metavar="FIELD=VALUE[,FIELD=VALUE]",
+                   help="--train: also measure each model with these config overrides, interleaved, and report the ratios")
+    b.add_argument("--no-breakdown", action="store_true", help="--train: skip the XLA-profiler breakdown of the step")
+    b.add_argument("--readme", default=None, help="--train: rewrite the train-bench table in this README")
     for name, split in (("eval", "test"), ("predict", "test")):
         q = sub.add_parser(name, help=f"{name} a zoo model")
         common(q, split)
@@ -262,24 +277,66 @@ def run_quantize(args) -> int:
     return 0
 
 
+def bench_threads(text: str) -> list[int]:
+    try:
+        threads = [int(t) for t in text.split(",")]
+    except ValueError:
+        sys.exit(f"--threads {text!r}: expected comma-separated integers")
+    if min(threads) < 1:
+        sys.exit(f"--threads {text!r}: thread counts must be positive")
+    return threads
+
+
+TRAIN_BENCH_FLAGS = ("batch", "window", "max_pillars", "compare", "no_breakdown", "readme")
+
+
+def bench_models(text: str) -> list[str]:
+    from . import zoo
+
+    return zoo.available() if text == "all" else [m for m in text.split(",") if m]
+
+
+def run_train_bench(args) -> int:
+    from .profile import training
+
+    window = 96 if args.window is None else args.window
+    try:
+        settings = training.Settings(batch=args.batch or 8, window=window or None, max_pillars=args.max_pillars or RUN_PILLARS,
+                                     repeats=args.repeats or 10, warmup=2 if args.warmup is None else args.warmup,
+                                     breakdown=not args.no_breakdown)
+        compare = training.parse_compare(args.compare) or None
+        if args.readme:
+            training.check_readme(args.readme)
+        records = training.run(bench_models(args.models or TRAIN_BENCH_MODELS), bench_threads(args.threads or "2"),
+                               settings, compare)
+    except (ValueError, RuntimeError) as err:  # unknown model or field, more threads than CPUs, a failed worker
+        sys.exit(f"dsfec bench --train: {err}")
+    content = training.payload(command_line(args), records, settings, compare)
+    training.write(args.out or training.RECORD, content)
+    if args.readme:
+        training.update_readme(args.readme, content)
+    print(json.dumps(content, indent=2) if args.json else training.markdown(content))
+    return 0
+
+
 def run_bench(args) -> int:
     from .core import atomic
     from . import zoo
     from .deploy import bench
 
-    models = [m for m in args.models.split(",") if m]
+    if args.train:
+        return run_train_bench(args)
+    train_only = [f"--{k.replace('_', '-')}" for k in TRAIN_BENCH_FLAGS if getattr(args, k) not in (None, False)]
+    if train_only:
+        sys.exit(f"dsfec bench: {', '.join(train_only)} need --train")
+    models = [m for m in (args.models or INFER_BENCH_MODELS).split(",") if m]
     runtimes = [r for r in args.runtimes.split(",") if r]
     bad = [m for m in models if m not in zoo.available()] + [r for r in runtimes if r not in bench.RUNTIMES]
     if bad:
         sys.exit(f"dsfec bench: unknown {bad}; models {zoo.available()}, runtimes {list(bench.RUNTIMES)}")
+    threads = bench_threads(args.threads or "1")
     try:
-        threads = [int(t) for t in args.threads.split(",")]
-    except ValueError:
-        sys.exit(f"--threads {args.threads!r}: expected comma-separated integers")
-    if min(threads) < 1:
-        sys.exit(f"--threads {args.threads!r}: thread counts must be positive")
-    try:
-        records = bench.run(models, runtimes, threads, args.repeats, args.warmup)
+        records = bench.run(models, runtimes, threads, args.repeats or 20, 3 if args.warmup is None else args.warmup)
     except (ValueError, RuntimeError) as err:  # e.g. more threads than CPUs, or a failed worker
         sys.exit(f"dsfec bench: {err}")
     table = bench.markdown(records)

@@ -29,11 +29,13 @@ from dsfec_jax import zoo
 from dsfec_jax.core.environment import environment
 from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.data.batches import BatchStream, collate
+from dsfec_jax.data.prefetch import Prefetcher
 from dsfec_jax.data.points.pillarize import PillarSpec
 from dsfec_jax.data.points.sources import load_frames
 from dsfec_jax.evaluate import validate
 from dsfec_jax.predict import Predictor
 from dsfec_jax.profile.records import profile
+from dsfec_jax.train.loss_watch import LossWatch, NonFiniteLoss
 from dsfec_jax.train.schedules import optimizer
 from dsfec_jax.train.step import init_state, train_step_fn
 
@@ -48,6 +50,9 @@ from .trial import match_classes, measured
 # calibration frames moved a candidate's Car mAP by up to 1.8 points (rms 1.2) and reordered them;
 # with 64, by at most 0.7 (rms 0.5, mostly a shift shared by every candidate) and never reordered them.
 CALIBRATION_BATCHES = 64
+# The supernet's losses stay on the device (train.loss_watch) and are read every this many steps
+# and before the supernet is saved: a non-finite one stops training within this many steps.
+LOSS_CHECK_EVERY = 50
 
 
 def hooks(base: str):
@@ -212,6 +217,13 @@ def supernet_file(trials: list[dict]) -> str:
     return f"supernet_{ident}.msgpack"
 
 
+def _check_supernet_losses(losses: LossWatch) -> None:
+    try:
+        losses.check()
+    except NonFiniteLoss as err:
+        raise FloatingPointError(f"supernet loss is {err.value} at step {err.step}") from err
+
+
 def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, path: Path, log, init=None):
     """Train the supernet (or read the one an interrupted run saved) -> (state, wall s, CPU s).
     `init`: trained variables to start from (search.inherit), else a fresh initialisation.
@@ -229,13 +241,15 @@ def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, pat
     t0, c0 = time.perf_counter(), time.process_time()
     state = init_state(supernet, tx, jax.random.key(seed), init)
     step_fn = supernet_step(supernet, tx)
-    for step in range(steps):
-        round_, pos = divmod(step, len(depths))
-        i = int(np.random.default_rng([seed, 7, round_]).permutation(len(depths))[pos])
-        batch = stream.batch(step)
-        state, loss = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]}, depths[i])
-        if not np.isfinite(float(loss)):
-            raise FloatingPointError(f"supernet loss is {float(loss)} at step {step}")
+    losses = LossWatch()
+    with Prefetcher(stream.batch, range(steps)) as batches:
+        for step, batch in batches:
+            round_, pos = divmod(step, len(depths))
+            i = int(np.random.default_rng([seed, 7, round_]).permutation(len(depths))[pos])
+            state, loss = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]}, depths[i])
+            losses.add(step, loss)
+            if (step + 1) % LOSS_CHECK_EVERY == 0 or step + 1 == steps:  # always before the save below
+                _check_supernet_losses(losses)
     wall_s, cpu_s = time.perf_counter() - t0, time.process_time() - c0
     field = zoo.family_of(supernet.config).supernet.field
     log(f"supernet {getattr(supernet.config, field)}: {steps} steps in {wall_s:.0f} s")

@@ -27,6 +27,46 @@ def bev_iou(boxes_a, boxes_b) -> np.ndarray:
     return _ratio(inter, area_a[:, None] + area_b[None, :] - inter)
 
 
+def bev_iou_aligned(boxes_a, boxes_b) -> np.ndarray:
+    """(P,) BEV IoU of the aligned pairs a[p], b[p] (both (P, 5)): bitwise `bev_iou(a, b)`'s
+    diagonal, since every pair goes through the same per-pair arithmetic; for callers that need a
+    few scattered pairs (greedy NMS) rather than a whole matrix."""
+    a, b = _as_boxes(boxes_a, 5), _as_boxes(boxes_b, 5)
+    if len(a) != len(b):
+        raise ValueError(f"expected as many boxes_b as boxes_a (aligned pairs), got {len(b)} and {len(a)}")
+    inter = np.zeros(len(a))
+    pairs = np.flatnonzero(may_touch(a, b))
+    for s in range(0, len(pairs), PAIR_CHUNK):
+        p = pairs[s:s + PAIR_CHUNK]
+        inter[p] = _pair_intersection(a[p], b[p])
+    return _ratio(inter, _area(a[:, 2], a[:, 3]) + _area(b[:, 2], b[:, 3]) - inter)
+
+
+def may_touch(boxes_a, boxes_b) -> np.ndarray:
+    """Bool, broadcast over the leading axes of boxes_a (..., 5) and boxes_b (..., 5): both boxes
+    have a positive area and their circumscribed circles meet. A pair failing it has no overlap, so
+    its IoU is exactly 0; every IoU here clips only the pairs that pass it."""
+    solid = (_area(boxes_a[..., 2], boxes_a[..., 3]) > 0) & (_area(boxes_b[..., 2], boxes_b[..., 3]) > 0)
+    return solid & circles_meet(boxes_a[..., 0] - boxes_b[..., 0], boxes_a[..., 1] - boxes_b[..., 1],
+                                circumradius(boxes_a), circumradius(boxes_b))
+
+
+def circumradius(boxes) -> np.ndarray:
+    """Radius of the circle through the corners of BEV boxes (..., 5)."""
+    return np.hypot(boxes[..., 2], boxes[..., 3]) / 2
+
+
+def circles_meet(dx, dy, radius_a, radius_b) -> np.ndarray:
+    """Circles of these radii with centres (dx, dy) apart meet; the relative 1e-9 of slack keeps
+    rounding from separating circles that touch."""
+    dist2 = np.square(dx)
+    dist2 += np.square(dy)
+    reach2 = np.add(radius_a, radius_b)
+    reach2 *= reach2
+    reach2 *= 1 + 1e-9  # in place, fewer temporaries: the values of dx**2 + dy**2 <= reach*reach*(1 + 1e-9)
+    return dist2 <= reach2
+
+
 def iou_3d(boxes_a, boxes_b) -> np.ndarray:
     """(M, K) 3D IoU of boxes ``(x, y, z, w, l, h, yaw)`` (z = centre), as the VoD/KITTI 3D AP uses.
 
@@ -75,14 +115,9 @@ def _ratio(inter, union) -> np.ndarray:
 
 
 def _candidate_pairs(a, b):
-    """Index pairs of boxes with positive areas whose circumscribed circles meet: all others have
-    zero overlap, so clipping only these keeps sparse scenes cheap."""
-    radius_a = np.hypot(a[:, 2], a[:, 3]) / 2
-    radius_b = np.hypot(b[:, 2], b[:, 3]) / 2
-    dist2 = (a[:, None, 0] - b[None, :, 0]) ** 2 + (a[:, None, 1] - b[None, :, 1]) ** 2
-    reach = radius_a[:, None] + radius_b[None, :]
-    solid = (_area(a[:, 2], a[:, 3]) > 0)[:, None] & (_area(b[:, 2], b[:, 3]) > 0)[None, :]
-    return np.nonzero(solid & (dist2 <= reach * reach * (1 + 1e-9)))
+    """Index pairs of the boxes that `may_touch`: all others have zero overlap, so clipping only
+    these keeps sparse scenes cheap."""
+    return np.nonzero(may_touch(a[:, None], b[None, :]))
 
 
 def _pair_intersection(a, b) -> np.ndarray:
@@ -141,6 +176,11 @@ def _compact(cand, keep):
 
 
 def _shoelace(poly) -> np.ndarray:
-    """(P,) signed areas of polygons (P, N, 2), positive when counter-clockwise."""
+    """(P,) signed areas of polygons (P, N, 2), positive when counter-clockwise.
+
+    The terms are added strictly in vertex order (a cumulative sum): the padding then adds exact
+    zeros, so a pair's area is the same to the last bit whatever the width of the batch it is
+    clipped in. (`sum` switches to pairwise summation from 8 terms on, so a pair's last bit used to
+    depend on the other pairs clipped with it; greedy NMS needs one answer per pair.)"""
     x, y = poly[..., 0], poly[..., 1]
-    return 0.5 * (x * np.roll(y, -1, 1) - np.roll(x, -1, 1) * y).sum(1)
+    return 0.5 * np.cumsum(x * np.roll(y, -1, 1) - np.roll(x, -1, 1) * y, 1)[:, -1]

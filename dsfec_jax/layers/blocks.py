@@ -5,7 +5,7 @@ from __future__ import annotations
 import flax.linen as nn
 
 from .activations import activation
-from .conv import Conv, DepthwiseConv, DepthwiseImpl, batch_norm
+from .conv import Conv, DepthwiseConv, DepthwiseImpl, Kernels, batch_norm
 
 
 class ConvBNAct(nn.Module):
@@ -15,10 +15,11 @@ class ConvBNAct(nn.Module):
     kernel: int = 3
     stride: int = 1
     act: str = "relu"
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, x, train: bool = False):
-        x = Conv(self.features, self.kernel, self.stride, name="conv")(x)
+        x = Conv(self.features, self.kernel, self.stride, kernels=self.kernels, name="conv")(x)
         return activation(self.act)(batch_norm(train, "bn")(x))
 
 
@@ -29,13 +30,14 @@ class DSConv(nn.Module):
     stride: int = 1
     act: str = "leaky_relu"
     depthwise_impl: DepthwiseImpl = "shifted"
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, x, train: bool = False):
         act = activation(self.act)
-        x = DepthwiseConv(3, self.stride, self.depthwise_impl, name="dw")(x)
+        x = DepthwiseConv(3, self.stride, self.depthwise_impl, self.kernels, name="dw")(x)
         x = act(batch_norm(train, "dw_bn")(x))
-        x = Conv(self.features, 1, name="pw")(x)
+        x = Conv(self.features, 1, kernels=self.kernels, name="pw")(x)
         return act(batch_norm(train, "pw_bn")(x))
 
 
@@ -46,16 +48,17 @@ class ResidualBottleneck(nn.Module):
     stride: int = 1
     act: str = "relu"
     expansion: int = 4
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, x, train: bool = False):
         act = activation(self.act)
-        planes = self.features // self.expansion
-        y = act(batch_norm(train, "bn1")(Conv(planes, 1, name="conv1")(x)))
-        y = act(batch_norm(train, "bn2")(Conv(planes, 3, self.stride, name="conv2")(y)))
-        y = batch_norm(train, "bn3")(Conv(self.features, 1, name="conv3")(y))
+        planes, k = self.features // self.expansion, self.kernels
+        y = act(batch_norm(train, "bn1")(Conv(planes, 1, kernels=k, name="conv1")(x)))
+        y = act(batch_norm(train, "bn2")(Conv(planes, 3, self.stride, kernels=k, name="conv2")(y)))
+        y = batch_norm(train, "bn3")(Conv(self.features, 1, kernels=k, name="conv3")(y))
         shortcut = x
         if self.stride != 1 or x.shape[-1] != self.features:
-            shortcut = Conv(self.features, 1, self.stride, name="proj")(x)
+            shortcut = Conv(self.features, 1, self.stride, kernels=k, name="proj")(x)
             shortcut = batch_norm(train, "proj_bn")(shortcut)
         return act(y + shortcut)

@@ -6,16 +6,31 @@ interceptor, so analytic FLOPs always describe the network that actually runs.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Literal
 
 import flax.linen as nn
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jax import lax
 
 DIMS = ("NHWC", "HWIO", "NHWC")
 DepthwiseImpl = Literal["shifted", "grouped"]
+# "fast": formulations chosen for XLA's CPU training step (1x1 convs as matmuls, a hand-written
+# depthwise gradient, sub-pixel upsampling); "plain": the textbook ones (lax.conv, autodiff,
+# lax.conv_transpose). Same parameters and the same values: tests hold the gradients equal, and
+# `dsfec bench --train --compare kernels=plain` measures the difference.
+Kernels = Literal["fast", "plain"]
+KERNELS = ("fast", "plain")
 kernel_init = nn.initializers.variance_scaling(2.0, "fan_in", "truncated_normal")
+
+
+def _check_kernels(kernels: str) -> str:
+    if kernels not in KERNELS:
+        raise ValueError(f"kernels={kernels!r}; valid: {', '.join(map(repr, KERNELS))}")
+    return kernels
 
 
 def same_pads(size: int, kernel: int, stride: int) -> tuple[int, int]:
@@ -33,14 +48,19 @@ class Conv(nn.Module):
     stride: int = 1
     use_bias: bool = False
     bias_init: nn.initializers.Initializer = nn.initializers.zeros
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, x_BxHxWxC):
         k, cin = self.kernel, x_BxHxWxC.shape[-1]
         w = self.param("kernel", kernel_init, (k, k, cin, self.features))
-        y = lax.conv_general_dilated(
-            x_BxHxWxC, w, (self.stride, self.stride), "SAME", dimension_numbers=DIMS
-        )
+        if k == 1 and _check_kernels(self.kernels) == "fast":
+            # a 1x1 conv is a matmul: XLA's CPU dot is ~2x its conv, forward and weight gradient
+            y = jnp.dot(x_BxHxWxC[:, :: self.stride, :: self.stride], w[0, 0])
+        else:
+            y = lax.conv_general_dilated(
+                x_BxHxWxC, w, (self.stride, self.stride), "SAME", dimension_numbers=DIMS
+            )
         if self.use_bias:
             y = y + self.param("bias", self.bias_init, (self.features,))
         return y
@@ -60,6 +80,7 @@ class DepthwiseConv(nn.Module):
     kernel: int = 3
     stride: int = 1
     impl: DepthwiseImpl = "shifted"
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, x_BxHxWxC):
@@ -71,7 +92,8 @@ class DepthwiseConv(nn.Module):
                 dimension_numbers=DIMS, feature_group_count=c,
             )
         if self.impl == "shifted":
-            return shifted_depthwise(x_BxHxWxC, w[:, :, 0, :], self.stride)
+            fast = _check_kernels(self.kernels) == "fast"
+            return (fast_shifted_depthwise if fast else shifted_depthwise)(x_BxHxWxC, w[:, :, 0, :], self.stride)
         raise ValueError(f"DepthwiseConv.impl={self.impl!r}; valid: 'shifted', 'grouped'")
 
     def macs(self, in_shape, out_shape) -> int:
@@ -82,39 +104,152 @@ def shifted_depthwise(x_BxHxWxC, w_KxKxC, stride: int, pads: tuple[int, int] | N
     """Depthwise conv as K*K multiply-adds of shifted views of the padded input. `pads`
     (low, high) on both axes; default TF 'SAME'."""
     k = w_KxKxC.shape[0]
-    _, h, w, _ = x_BxHxWxC.shape
-    ph, pw = (same_pads(h, k, stride), same_pads(w, k, stride)) if pads is None else (pads, pads)
-    xp = jnp.pad(x_BxHxWxC, ((0, 0), ph, pw, (0, 0)))
-    ho, wo = (h + sum(ph) - k) // stride + 1, (w + sum(pw) - k) // stride + 1
+    xp, ho, wo = _padded(x_BxHxWxC, k, stride, pads)
     out = None
     for i in range(k):
         for j in range(k):
-            tap = xp[:, i : i + (ho - 1) * stride + 1 : stride, j : j + (wo - 1) * stride + 1 : stride, :]
-            term = tap * w_KxKxC[i, j]
+            term = _tap(xp, i, j, ho, wo, stride) * w_KxKxC[i, j]
             out = term if out is None else out + term
     return out
 
 
+def _padded(x_BxHxWxC, k: int, stride: int, pads):
+    """The padded input and the output size (ho, wo) of a KxK window at `stride`."""
+    _, h, w, _ = x_BxHxWxC.shape
+    ph, pw = (same_pads(h, k, stride), same_pads(w, k, stride)) if pads is None else (pads, pads)
+    xp = jnp.pad(x_BxHxWxC, ((0, 0), ph, pw, (0, 0)))
+    return xp, (h + sum(ph) - k) // stride + 1, (w + sum(pw) - k) // stride + 1
+
+
+def _tap(xp, i: int, j: int, ho: int, wo: int, stride: int):
+    """The strided view of the padded input that kernel tap (i, j) multiplies."""
+    return xp[:, i : i + (ho - 1) * stride + 1 : stride, j : j + (wo - 1) * stride + 1 : stride, :]
+
+
+DW_GRAD_CHUNK = 2  # images per pass of the kernel-gradient sums: one pair's taps stay in cache
+
+
+@functools.partial(jax.custom_vjp, nondiff_argnums=(2,))
+def fast_shifted_depthwise(x_BxHxWxC, w_KxKxC, stride: int):
+    """`shifted_depthwise` (TF 'SAME') with a hand-written gradient of the same value.
+
+    Autodiff of the shifted form keeps all K*K shifted views of the input for the backward pass
+    (9 activation-sized copies per 3x3 layer, the largest memory traffic of a DSFEC training
+    step). This keeps only the input: the input gradient is the flipped-kernel depthwise conv of
+    the (stride-dilated) output gradient, and the kernel gradient re-reads each tap view, summed
+    over a few images at a time so they stay in cache.
+    """
+    return shifted_depthwise(x_BxHxWxC, w_KxKxC, stride)
+
+
+def _depthwise_fwd(x_BxHxWxC, w_KxKxC, stride: int):
+    return shifted_depthwise(x_BxHxWxC, w_KxKxC, stride), (x_BxHxWxC, w_KxKxC)
+
+
+def _depthwise_bwd(stride: int, residuals, g_BxHoxWoxC):
+    x, w = residuals
+    return _depthwise_input_grad(g_BxHoxWoxC, w, x.shape, stride), _depthwise_kernel_grad(x, g_BxHoxWoxC, w.shape[0], stride)
+
+
+def _depthwise_input_grad(g, w_KxKxC, x_shape, stride: int):
+    """d x: output o*s + t - pad_low reads input row m, so m gets g[o] * w[t]: a stride-1 conv of
+    g dilated by s with the flipped kernel, padded to cover every input row."""
+    k = w_KxKxC.shape[0]
+    (low_h, _), (low_w, _) = same_pads(x_shape[1], k, stride), same_pads(x_shape[2], k, stride)
+    ho, wo = g.shape[1], g.shape[2]
+    pad_h = (k - 1 - low_h, x_shape[1] - 1 + low_h - (ho - 1) * stride, stride - 1)
+    pad_w = (k - 1 - low_w, x_shape[2] - 1 + low_w - (wo - 1) * stride, stride - 1)
+    gd = lax.pad(g, jnp.zeros((), g.dtype), ((0, 0, 0), pad_h, pad_w, (0, 0, 0)))
+    return shifted_depthwise(gd, w_KxKxC[::-1, ::-1], 1, pads=(0, 0))
+
+
+def _depthwise_kernel_grad(x, g, k: int, stride: int):
+    """d w[i, j] = sum over images and pixels of tap (i, j) times g."""
+    xp, ho, wo = _padded(x, k, stride, None)
+
+    def chunk(pair):
+        xp_c, g_c = pair
+        return jnp.stack([jnp.sum(_tap(xp_c[None], i, j, ho, wo, stride)[0] * g_c, (0, 1))
+                          for i in range(k) for j in range(k)])
+
+    per_image = lax.map(chunk, (xp, g), batch_size=DW_GRAD_CHUNK)
+    return per_image.sum(0).reshape(k, k, -1)
+
+
+fast_shifted_depthwise.defvjp(_depthwise_fwd, _depthwise_bwd)
+
+
 class ConvTranspose(nn.Module):
-    """KxK transposed convolution ('deconv') that upsamples by `stride`, bias optional (PIXOR: with)."""
+    """KxK transposed convolution ('deconv') that upsamples by `stride`, bias optional (PIXOR: with).
+
+    `kernels="fast"` runs it as one dense conv to stride^2 x features channels and a
+    depth-to-space (`subpixel_conv_transpose`): the same numbers, but XLA's CPU backend computes
+    the dilated form's weight gradient as a window-sized convolution, the slowest op of a DSFEC
+    training step (about 15 % of DSFEC-S's). `kernels="plain"` is `lax.conv_transpose`. Both
+    read the same (K, K, C_in, C_out) kernel.
+    """
 
     features: int
     kernel: int = 3
     stride: int = 2
     use_bias: bool = True
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, x_BxHxWxC):
         cin = x_BxHxWxC.shape[-1]
         w = self.param("kernel", kernel_init, (self.kernel, self.kernel, cin, self.features))
-        y = lax.conv_transpose(
-            x_BxHxWxC, w, (self.stride, self.stride), "SAME", dimension_numbers=DIMS
-        )
+        if _check_kernels(self.kernels) == "fast":
+            y = subpixel_conv_transpose(x_BxHxWxC, w, self.stride)
+        else:
+            y = lax.conv_transpose(x_BxHxWxC, w, (self.stride, self.stride), "SAME", dimension_numbers=DIMS)
         return y + self.param("bias", nn.initializers.zeros, (self.features,)) if self.use_bias else y
 
     def macs(self, in_shape, out_shape) -> int:
         # Each input pixel scatters a KxK patch: zero taps of the dilated form are not counted.
         return math.prod(in_shape[:-1]) * self.kernel**2 * in_shape[-1] * self.features
+
+
+def transpose_pads(kernel: int, stride: int) -> tuple[int, int]:
+    """(low, high) padding of the stride-dilated input in `lax.conv_transpose(..., "SAME")`
+    (jax/_src/lax/convolution.py, `_conv_transpose_padding`), which the sub-pixel form mirrors."""
+    total = kernel + stride - 2
+    low = kernel - 1 if stride > kernel - 1 else -(-total // 2)
+    return low, total - low
+
+
+@functools.lru_cache(maxsize=None)
+def _phase_taps(kernel: int, stride: int) -> tuple[np.ndarray, int, int]:
+    """For each output phase p (o = stride*a + p) and window slot j over input rows
+    a + lo .. a + hi: the kernel tap it multiplies, or `kernel` (a zero tap) -> ((stride, m), lo, hi).
+    Output o reads dilated row o + t - pad, a real input row only when that is a multiple of the stride."""
+    pad = transpose_pads(kernel, stride)[0]
+    offsets = {(p, t): (p + t - pad) // stride for p in range(stride) for t in range(kernel)
+               if (p + t - pad) % stride == 0}
+    lo, hi = min(offsets.values()), max(offsets.values())
+    taps = np.full((stride, hi - lo + 1), kernel, np.int32)
+    for (p, t), d in offsets.items():
+        taps[p, d - lo] = t
+    return taps, lo, hi
+
+
+def subpixel_conv_transpose(x_BxHxWxC, w_KxKxIxO, stride: int):
+    """`lax.conv_transpose(x, w, (s, s), "SAME")` as a dense conv of the undilated input with a
+    kernel that holds every output phase's taps (zeros where a phase has none), then
+    depth-to-space (the sub-pixel convolution of Shi et al., CVPR 2016)."""
+    k, _, cin, cout = w_KxKxIxO.shape
+    b, h, wd, _ = x_BxHxWxC.shape
+    taps, lo, hi = _phase_taps(k, stride)
+    w_ext = jnp.pad(w_KxKxIxO, ((0, 1), (0, 1), (0, 0), (0, 0)))  # index k is the zero tap
+    # (m, m, s, s, I, O): slot (jr, jc) of phase (pr, pc) holds tap (taps[pr, jr], taps[pc, jc])
+    kern = w_ext[taps.T[:, None, :, None], taps.T[None, :, None, :]]
+    m = taps.shape[1]
+    kern = kern.transpose(0, 1, 4, 2, 3, 5).reshape(m, m, cin, stride * stride * cout)
+    pads = ((max(-lo, 0), max(hi, 0)),) * 2
+    y = lax.conv_general_dilated(x_BxHxWxC, kern, (1, 1), pads, dimension_numbers=DIMS)
+    y = y[:, max(lo, 0) : max(lo, 0) + h, max(lo, 0) : max(lo, 0) + wd]
+    y = y.reshape(b, h, wd, stride, stride, cout).transpose(0, 1, 3, 2, 4, 5)
+    return y.reshape(b, h * stride, wd * stride, cout)
 
 
 class PointLinear(nn.Module):

@@ -11,6 +11,11 @@ RUN_DIR/
 A kill at any point leaves a resumable directory: checkpoints are written as one unit (see
 dsfec_jax.core.checkpoint; an incomplete one is skipped for the previous), a torn last metrics line is
 dropped.
+
+The host does not wait for each step: batches are built ahead by a background worker
+(dsfec_jax.data.prefetch), and the losses stay on the device until a log, evaluation or
+checkpoint step reads them together (train.loss_watch), which is also where a non-finite loss
+stops the run, before any diverged state is evaluated or saved.
 """
 
 from __future__ import annotations
@@ -19,7 +24,6 @@ import dataclasses
 import datetime
 import json
 import logging
-import math
 import time
 from pathlib import Path
 from typing import Callable
@@ -30,6 +34,8 @@ from tqdm import tqdm
 
 from ..core import atomic, checkpoint
 from ..data.batches import BatchStream
+from ..data.prefetch import Prefetcher
+from .loss_watch import LossWatch, NonFiniteLoss
 from .schedules import Schedule, optimizer
 from .step import init_state, make_train_step
 
@@ -177,26 +183,29 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     end = spec.total_steps if spec.stop_at is None else min(spec.stop_at, spec.total_steps)
     best = _best_score(spec.run_dir, best_key)
     scores = None
-    bar = tqdm(range(start, end), initial=start, total=end, disable=not spec.progress, desc=detector.name)
+    losses = LossWatch()
     t0 = time.perf_counter()
-    with open(log_path, "a") as log:
-        for step in bar:
-            batch = stream.batch(step)
+    with open(log_path, "a") as log, Prefetcher(stream.batch, range(start, end)) as batches:
+        bar = tqdm(batches, initial=start, total=end, disable=not spec.progress, desc=detector.name)
+        for step, batch in bar:
             step_fn = step_fns[batch["window"] % len(step_fns)]
             state, metrics = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]})
-            loss = float(metrics["loss"])
-            if not math.isfinite(loss):
-                last = checkpoints(spec.run_dir)
-                raise TrainingDiverged(f"{detector.name}: loss is {loss} at step {step}; stopped. Last good "
-                                       f"checkpoint: {last[-1] if last else 'none (diverged before the first)'}")
+            losses.add(step, metrics["loss"])
             done = step + 1
+            log_step = done % spec.log_every == 0 or done == end
+            eval_step = evaluate is not None and eval_every and (done % eval_every == 0 or done == end)
+            save_step = done % spec.ckpt_every == 0 or done == end
+            if not (log_step or eval_step or save_step):
+                continue  # nothing to read: the next step is queued without waiting for this one
+            loss = _checked_loss(losses, detector.name, spec.run_dir)  # before any state is evaluated or saved
             rate = stream.batch_size * (done - start) / (time.perf_counter() - t0)
-            bar.set_postfix(loss=f"{loss:.3f}", fps=f"{rate:.1f}")
-            if done % spec.log_every == 0 or done == end:
-                row = {"step": done, "frames_per_s": round(rate, 2), **{k: float(v) for k, v in metrics.items()}}
+            if log_step:
+                bar.set_postfix(loss=f"{loss:.3f}", fps=f"{rate:.1f}")
+                values = {k: float(v) for k, v in jax.device_get(metrics).items()}
+                row = {"step": done, "frames_per_s": round(rate, 2), **values}
                 log.write(json.dumps(row) + "\n")
                 log.flush()
-            if evaluate is not None and eval_every and (done % eval_every == 0 or done == end):
+            if eval_step:
                 scores = evaluate(state)
                 log.write(json.dumps({"step": done, "eval": scores}) + "\n")
                 log.flush()
@@ -204,9 +213,19 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                     best = scores[best_key]
                     checkpoint.save(spec.run_dir / "checkpoints" / "best.msgpack", jax.device_get(state),
                                     {"step": done, best_key: best, "eval": scores})
-            if done % spec.ckpt_every == 0 or done == end:
+            if save_step:
                 _save(spec, state, done, {"loss": loss})
     return state, scores
+
+
+def _checked_loss(losses: LossWatch, name: str, run_dir: Path) -> float:
+    """The latest loss; TrainingDiverged naming the first non-finite step since the last check."""
+    try:
+        return losses.check()
+    except NonFiniteLoss as err:
+        last = checkpoints(run_dir)
+        raise TrainingDiverged(f"{name}: loss is {err.value} at step {err.step}; stopped. Last good "
+                               f"checkpoint: {last[-1] if last else 'none (diverged before the first)'}") from err
 
 
 def _best_score(run_dir: Path, key: str) -> float:

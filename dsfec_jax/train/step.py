@@ -25,17 +25,26 @@ def init_state(detector, tx: optax.GradientTransformation, rng: jax.Array,
             "opt_state": tx.init(variables["params"]), "step": jnp.zeros((), jnp.int32)}
 
 
+def loss_function(detector):
+    """(params, batch_stats, batch, extra={}) -> (loss, (parts, new batch_stats)) with the family's
+    loss: what the train step differentiates (the training benchmark times it too). `extra`
+    holds traced network inputs beside the batch's (the one-shot supernet's `depth`)."""
+    compute_loss = zoo.family_of(detector.config).loss(detector.config)
+
+    def loss_fn(params, batch_stats, batch, extra=None):
+        variables = {"params": params, "batch_stats": batch_stats}
+        outputs, updates = detector.apply(variables, {**batch["inputs"], **(extra or {})}, train=True)
+        loss, parts = compute_loss(outputs, batch["targets"])
+        return loss, (parts, updates["batch_stats"])
+
+    return loss_fn
+
+
 def train_step_fn(detector, tx: optax.GradientTransformation, extra_inputs: tuple[str, ...] = ()):
     """The un-jitted step (state, batch, *extra) -> (new state, {'loss', 'grad_norm', parts...}) with
     the family's loss. `extra_inputs` name traced network inputs passed after the batch (the
     one-shot supernet's `depth`), so one compiled step serves every value of them."""
-    compute_loss = zoo.family_of(detector.config).loss(detector.config)
-
-    def loss_fn(params, batch_stats, batch, extra):
-        variables = {"params": params, "batch_stats": batch_stats}
-        outputs, updates = detector.apply(variables, {**batch["inputs"], **extra}, train=True)
-        loss, parts = compute_loss(outputs, batch["targets"])
-        return loss, (parts, updates["batch_stats"])
+    loss_fn = loss_function(detector)
 
     def train_step(state: dict, batch: dict, *extra_values):
         extra = dict(zip(extra_inputs, extra_values))

@@ -9,18 +9,19 @@ from dsfec_jax.data.batches import BatchStream
 from dsfec_jax.data.points.pillarize import PillarSpec
 from dsfec_jax import zoo
 from dsfec_jax.train.loop import RunSpec, TrainingDiverged, checkpoints, train
-from dsfec_jax.train.schedules import get_schedule
+from dsfec_jax.train.schedules import get_schedule, optimizer
+from dsfec_jax.train.step import init_state, make_train_step
 from conftest import tiny
 from builders import toy_frame
 
 
-def setup(tmp_path, name, lr=2e-3, total=6, stop_at=None, ckpt_every=2):
+def setup(tmp_path, name, lr=2e-3, total=6, stop_at=None, ckpt_every=2, log_every=1):
     det = tiny("dsfec_s")
     frames = [toy_frame(np.random.default_rng(i), det.config.grid) for i in range(6)]
     stream = BatchStream(frames, PillarSpec.of(det.config), zoo.family_of(det.config).targets(det.config),
                          batch_size=2, seed=7)
     sched = get_schedule("quick", learning_rate=lr, warmup_steps=2, batch_size=2, steps=total)
-    spec = RunSpec(tmp_path / name, sched, seed=3, total_steps=total, stop_at=stop_at, log_every=1,
+    spec = RunSpec(tmp_path / name, sched, seed=3, total_steps=total, stop_at=stop_at, log_every=log_every,
                    ckpt_every=ckpt_every, keep=2, progress=False)
     return det, stream, spec
 
@@ -87,6 +88,72 @@ def test_divergence_stops_with_the_last_good_checkpoint_intact(tmp_path):
     assert last, "at least one good step should have been checkpointed"
     tree = checkpoint.load(last[-1])
     assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(tree["params"]))
+
+
+def logged(run_dir):
+    """metrics.jsonl rows without their timing."""
+    rows = [json.loads(l) for l in (run_dir / "metrics.jsonl").read_text().splitlines()]
+    return [{k: v for k, v in r.items() if k != "frames_per_s"} for r in rows]
+
+
+def test_runs_are_deterministic_and_losses_read_late_are_the_steps_own(tmp_path):
+    """Two runs log the same rows bit for bit, those of training step s on stream.batch(s) one step
+    at a time; so does a run stopped after step 3 and resumed.
+    Losses stay on the device until a log step reads them: a run logging every 3rd step logs
+    exactly the rows of one logging every step, at those steps."""
+    for name in ("a", "b"):
+        det, stream, spec = setup(tmp_path, name)
+        train(det, stream, spec, {"test": True})
+    straight = logged(tmp_path / "a")
+    assert [r["step"] for r in straight] == [1, 2, 3, 4, 5, 6]
+    assert len({r["loss"] for r in straight}) == 6  # the rows differ from step to step: the test can fail
+    assert logged(tmp_path / "b") == straight
+    det, stream, spec = setup(tmp_path, "replay")  # step s trains on stream.batch(s), read at once
+    tx = optimizer(spec.schedule, spec.total_steps)
+    state, step_fn = init_state(det, tx, jax.random.key(spec.seed)), make_train_step(det, tx)
+    replayed = []
+    for s in range(6):
+        batch = stream.batch(s)
+        state, metrics = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]})
+        replayed.append(float(metrics["loss"]))
+    assert replayed == [r["loss"] for r in straight]
+    det, stream, spec = setup(tmp_path, "resumed", stop_at=3)
+    train(det, stream, spec, {"test": True})
+    det, stream, spec = setup(tmp_path, "resumed")
+    train(det, stream, spec, {"test": True})
+    assert logged(tmp_path / "resumed") == straight
+    det, stream, spec = setup(tmp_path, "sparse", log_every=3)
+    train(det, stream, spec, {"test": True})
+    assert logged(tmp_path / "sparse") == [r for r in straight if r["step"] in (3, 6)]
+    manifest = json.loads(checkpoint.manifest_path(checkpoints(spec.run_dir)[-1]).read_text())
+    assert manifest["loss"] == straight[-1]["loss"]
+
+
+def poison(stream, at):
+    """The stream with non-finite inputs at step `at`: the loss becomes NaN at exactly that step."""
+    clean = stream.batch
+
+    def batch(step):
+        b = clean(step)
+        if step == at:
+            b["inputs"] = {**b["inputs"], "points": np.full_like(b["inputs"]["points"], np.nan)}
+        return b
+
+    stream.batch = batch
+    return stream
+
+
+def test_divergence_between_log_steps_is_caught_before_the_next_checkpoint(tmp_path):
+    """Losses are read at log and checkpoint steps only: a NaN at step 4 (logged every 100 steps,
+    saved every 3) is named with its step when step 6 is about to be saved, and no checkpoint
+    holds the diverged state."""
+    det, stream, spec = setup(tmp_path, "nan", total=8, ckpt_every=3, log_every=100)
+    message = r"loss is nan at step 4; stopped\. Last good checkpoint: .*step_0000003\.msgpack"
+    with pytest.raises(TrainingDiverged, match=message):
+        train(det, poison(stream, at=4), spec, {"test": True})
+    assert [p.name for p in checkpoints(spec.run_dir)] == ["step_0000003.msgpack"]
+    tree = checkpoint.load(checkpoints(spec.run_dir)[-1])
+    assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(tree))
 
 
 def test_training_windows_cover_the_grid_with_equal_shapes():

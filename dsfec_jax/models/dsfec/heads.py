@@ -7,7 +7,7 @@ import math
 import flax.linen as nn
 
 from ...layers import Conv, ConvBNAct, DSConv
-from ...layers.conv import DepthwiseImpl
+from ...layers.conv import DepthwiseImpl, Kernels
 
 CLS_PRIOR = 0.01  # focal-loss prior: start with ~1% foreground so the loss is not swamped
 
@@ -22,14 +22,15 @@ class DenseHead(nn.Module):
     kind: str = "conv"  # "conv" | "dsconv"
     act: str = "swish"
     depthwise_impl: DepthwiseImpl = "shifted"
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, x, train: bool = False):
         for i in range(self.convs):
             if self.kind == "conv":
-                x = ConvBNAct(self.width, 3, 1, self.act, name=f"tower{i}")(x, train)
+                x = ConvBNAct(self.width, 3, 1, self.act, self.kernels, name=f"tower{i}")(x, train)
             else:
-                x = DSConv(self.width, 1, self.act, self.depthwise_impl, name=f"tower{i}")(x, train)
+                x = DSConv(self.width, 1, self.act, self.depthwise_impl, self.kernels, name=f"tower{i}")(x, train)
         prior = -math.log((1 - CLS_PRIOR) / CLS_PRIOR)
         cls = Conv(self.num_classes, 3, use_bias=True, bias_init=nn.initializers.constant(prior), name="cls")(x)
         box = Conv(self.box_code_size, 3, use_bias=True, name="box")(x)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import flax.linen as nn
 
 from ...layers import Conv, ConvTranspose
+from ...layers.conv import Kernels
 
 
 class TopDownNeck(nn.Module):
@@ -14,13 +15,15 @@ class TopDownNeck(nn.Module):
     so len(widths) stages are used and the output has the resolution of the finest one."""
 
     widths: tuple[int, ...] = (192, 128, 64)
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, stages: list, train: bool = False):
         used = stages[::-1][: len(self.widths)]
-        x = Conv(self.widths[0], 1, use_bias=True, name="lateral0")(used[0])
+        k = self.kernels
+        x = Conv(self.widths[0], 1, use_bias=True, kernels=k, name="lateral0")(used[0])
         for i, (width, lateral) in enumerate(zip(self.widths[1:], used[1:]), start=1):
             factor = lateral.shape[1] // x.shape[1]
-            x = ConvTranspose(width, 3, factor, name=f"deconv{i}")(x)
-            x = x + Conv(width, 1, use_bias=True, name=f"lateral{i}")(lateral)
+            x = ConvTranspose(width, 3, factor, kernels=k, name=f"deconv{i}")(x)
+            x = x + Conv(width, 1, use_bias=True, kernels=k, name=f"lateral{i}")(lateral)
         return x

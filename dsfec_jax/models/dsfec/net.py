@@ -14,6 +14,7 @@ import numpy as np
 
 from ...core.grid import DSFEC_GRID, Grid
 from ...core.columns import NUSCENES_FEATURES
+from ...layers.conv import KERNELS
 from ...layers import ACTIVATIONS, ConvBNAct, DSConv, PillarFeatureNet, ResidualBottleneck, check_fec_filters, scatter_to_bev
 from .heads import DenseHead
 from .necks import TopDownNeck
@@ -45,6 +46,7 @@ class DSFECConfig:
     stage_widths: tuple[int, int, int, int] = (96, 192, 256, 384)
     stage_strides: tuple[int, int, int, int] = (1, 2, 2, 2)
     depthwise_impl: str = "shifted"  # "shifted" (fast jitted CPU) | "grouped" (ONNX export)
+    kernels: str = "fast"  # "fast" (CPU training formulations) | "plain" (textbook ones; layers/conv.py)
     # neck and heads
     neck_widths: tuple[int, ...] = (192, 128, 64)
     head_convs: int = 4
@@ -94,6 +96,7 @@ def validate(cfg: DSFECConfig) -> None:
     need(cfg.block in ("dsconv", "residual"), "block", "'dsconv' or 'residual'")
     need(cfg.head_kind in ("conv", "dsconv"), "head_kind", "'conv' or 'dsconv'")
     need(cfg.depthwise_impl in ("shifted", "grouped"), "depthwise_impl", "'shifted' or 'grouped'")
+    need(cfg.kernels in KERNELS, "kernels", " or ".join(map(repr, KERNELS)))
     for field in ("stage_blocks", "stage_widths", "stage_strides"):
         values = getattr(cfg, field)
         need(len(values) == 4 and all(int(v) >= 1 for v in values), field, "4 integers >= 1 (one per stage)")
@@ -116,13 +119,13 @@ class DSFECNet(nn.Module):
         c = self.cfg
         filters = c.fec_filters if c.encoder == "fec" else (c.pointpillars_filters,)
         self.pillar_net = PillarFeatureNet(c.grid, c.encoder, tuple(filters), c.act_fec)
-        self.stem = [ConvBNAct(c.stem_filters, 3, 1, c.act_stem, name=f"stem{i}") for i in range(c.stem_convs)]
+        self.stem = [ConvBNAct(c.stem_filters, 3, 1, c.act_stem, c.kernels, name=f"stem{i}") for i in range(c.stem_convs)]
         self.stages = [self._stage(i) for i in range(4)]
-        self.neck = TopDownNeck(tuple(c.neck_widths))
+        self.neck = TopDownNeck(tuple(c.neck_widths), c.kernels)
         acts = (c.act_car_head, c.act_truck_head, c.act_vru_head)
         self.heads = {
             name: DenseHead(len(classes), c.box_code_size, c.head_convs, c.head_width, c.head_kind, act,
-                            c.depthwise_impl, name=f"head_{name}")
+                            c.depthwise_impl, c.kernels, name=f"head_{name}")
             for name, classes, act in zip(HEAD_NAMES, c.head_classes, acts)
         }
 
@@ -133,9 +136,9 @@ class DSFECNet(nn.Module):
             stride = c.stage_strides[i] if b == 0 else 1
             name = f"stage{i + 1}_block{b}"
             if c.block == "dsconv":
-                blocks.append(DSConv(c.stage_widths[i], stride, c.act_backbone, c.depthwise_impl, name=name))
+                blocks.append(DSConv(c.stage_widths[i], stride, c.act_backbone, c.depthwise_impl, c.kernels, name=name))
             else:
-                blocks.append(ResidualBottleneck(c.stage_widths[i], stride, c.act_backbone, name=name))
+                blocks.append(ResidualBottleneck(c.stage_widths[i], stride, c.act_backbone, kernels=c.kernels, name=name))
         return blocks
 
     def encode(self, points, mask, coords, train: bool = False):

@@ -20,7 +20,7 @@ BOX_OUTPUTS = (("reg", 2), ("height", 1), ("dim", 3), ("rot", 2), ("iou", 1))
 
 
 def conv_bias_bn_relu(x, features: int, train: bool, name: str):
-    x = Conv(features, 3, 1, use_bias=True, name=name)(x)
+    x = Conv(features, 3, 1, use_bias=True, name=name)(x)  # 3x3: the same in either `kernels`
     return nn.relu(batch_norm(train, f"{name}_bn")(x))
 
 
@@ -28,11 +28,12 @@ class CenterHead(nn.Module):
     num_classes: int
     width: int = 64
     corner_head: bool = True  # an auxiliary training target; dropped from the deployed model
+    kernels: str = "fast"  # layers.conv.Kernels
 
     @nn.compact
     def __call__(self, x, train: bool = False) -> dict:
         x = conv_bias_bn_relu(x, self.width, train, "shared")
-        x = ConvTranspose(self.width, 2, 2, use_bias=False, name="deblock")(x)
+        x = ConvTranspose(self.width, 2, 2, use_bias=False, kernels=self.kernels, name="deblock")(x)
         x = nn.relu(batch_norm(train, "deblock_bn")(x))
         outputs = list(BOX_OUTPUTS) + [("hm", self.num_classes)] + ([("corner_hm", 1)] if self.corner_head else [])
         maps = {}

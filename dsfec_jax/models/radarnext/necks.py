@@ -33,14 +33,16 @@ class SECONDFPN(nn.Module):
     no bias), concatenated."""
 
     channels: int = 128
+    kernels: str = "fast"  # layers.conv.Kernels
 
     @nn.compact
     def __call__(self, stages: list, train: bool = False):
         x2, x1, x0 = stages
+        k = self.kernels
         ups = [
-            Conv(self.channels, 2, 2, name="down0")(x2),
-            ConvTranspose(self.channels, 1, 1, use_bias=False, name="up1")(x1),
-            ConvTranspose(self.channels, 2, 2, use_bias=False, name="up2")(x0),
+            Conv(self.channels, 2, 2, kernels=k, name="down0")(x2),
+            ConvTranspose(self.channels, 1, 1, use_bias=False, kernels=k, name="up1")(x1),
+            ConvTranspose(self.channels, 2, 2, use_bias=False, kernels=k, name="up2")(x0),
         ]
         return jnp.concatenate([nn.relu(batch_norm(train, f"bn{i}")(u)) for i, u in enumerate(ups)], -1)
 
@@ -54,6 +56,7 @@ class PANeck(nn.Module):
     branches: int = 1
     deploy: bool = False
     depthwise_impl: DepthwiseImpl = "shifted"
+    kernels: str = "fast"  # layers.conv.Kernels
 
     def _dcn(self, position: int, x):
         if position not in self.dcn_positions:
@@ -67,21 +70,22 @@ class PANeck(nn.Module):
     def __call__(self, stages: list, train: bool = False):
         x2, x1, x0 = stages
         x2, x0 = self._dcn(3, x2), self._dcn(1, x0)
+        k = self.kernels
         # top-down
-        f0 = ConvBNAct(128, 1, 1, "relu", name="reduce0")(x0, train)                      # H/8
-        up0 = ConvTranspose(128, 2, 2, name="upsample0")(f0)
+        f0 = ConvBNAct(128, 1, 1, "relu", k, name="reduce0")(x0, train)                      # H/8
+        up0 = ConvTranspose(128, 2, 2, kernels=k, name="upsample0")(f0)
         t1 = self._rep(128, "rep_td1")(self._dcn(2, jnp.concatenate([up0, x1], -1)), train)  # H/4
-        f1 = self._dcn(5, ConvBNAct(64, 1, 1, "relu", name="reduce1")(t1, train))
-        up1 = ConvTranspose(64, 2, 2, name="upsample1")(f1)
+        f1 = self._dcn(5, ConvBNAct(64, 1, 1, "relu", k, name="reduce1")(t1, train))
+        up1 = ConvTranspose(64, 2, 2, kernels=k, name="upsample1")(f1)
         p2 = self._rep(64, "rep_td2")(self._dcn(4, jnp.concatenate([up1, x2], -1)), train)   # H/2
         # bottom-up
-        d2 = ConvBNAct(64, 3, 2, "relu", name="down2")(p2, train)
+        d2 = ConvBNAct(64, 3, 2, "relu", k, name="down2")(p2, train)
         p1 = self._rep(128, "rep_bu1")(jnp.concatenate([d2, f1], -1), train)                # H/4
-        d1 = ConvBNAct(128, 3, 2, "relu", name="down1")(p1, train)
+        d1 = ConvBNAct(128, 3, 2, "relu", k, name="down1")(p1, train)
         p0 = self._rep(256, "rep_bu0")(jnp.concatenate([d1, f0], -1), train)                # H/8
         # fusion at H/4
         return jnp.concatenate([
-            ConvBNAct(128, 3, 2, "relu", name="fuse2")(p2, train),
-            ConvTranspose(128, 1, 1, name="fuse1")(p1),
-            ConvTranspose(128, 2, 2, name="fuse0")(p0),
+            ConvBNAct(128, 3, 2, "relu", k, name="fuse2")(p2, train),
+            ConvTranspose(128, 1, 1, kernels=k, name="fuse1")(p1),
+            ConvTranspose(128, 2, 2, kernels=k, name="fuse0")(p0),
         ], -1)

@@ -18,6 +18,7 @@ import flax.linen as nn
 from ...core.grid import TJ4D_GRID, VOD_GRID, Grid
 from ...core.columns import TJ4D_FEATURES, VOD_FEATURES
 from ...layers import ConvBNAct, PillarFeatureNet, RepDWSeparable, reparameterize_tree, scatter_to_bev
+from ...layers.conv import KERNELS
 from .center_head import CenterHead
 from ..pillar_inputs import random_pillar_inputs
 from .necks import DCN_POSITIONS, SECONDFPN, PANeck
@@ -55,6 +56,7 @@ class RadarNeXtConfig:
     classes: tuple[str, ...] = VOD_CLASSES
     corner_head: bool = True
     depthwise_impl: str = "shifted"  # "shifted" (fast jitted CPU) | "grouped" (ONNX export)
+    kernels: str = "fast"  # "fast" (CPU training formulations) | "plain" (textbook ones; layers/conv.py)
     notes: str = ""
 
 
@@ -99,6 +101,7 @@ def validate(cfg: RadarNeXtConfig) -> None:
         need(int(getattr(cfg, field)) >= 1, field, "an integer >= 1")
     need(len(cfg.classes) >= 1, "classes", "at least one class")
     need(cfg.depthwise_impl in ("shifted", "grouped"), "depthwise_impl", "'shifted' or 'grouped'")
+    need(cfg.kernels in KERNELS, "kernels", " or ".join(map(repr, KERNELS)))
     need(tuple(cfg.point_features[:3]) == ("x", "y", "z"), "point_features", "x, y, z as the first three columns")
 
 
@@ -127,13 +130,14 @@ class DenseBackbone(nn.Module):
 
     layer_nums: tuple[int, ...]
     channels: tuple[int, ...]
+    kernels: str = "fast"
 
     @nn.compact
     def __call__(self, x, train: bool = False) -> list:
         outs = []
         for s, (n, c) in enumerate(zip(self.layer_nums, self.channels)):
             for i in range(n + 1):
-                x = ConvBNAct(c, 3, 2 if i == 0 else 1, "relu", name=f"stage{s + 1}_conv{i}")(x, train)
+                x = ConvBNAct(c, 3, 2 if i == 0 else 1, "relu", self.kernels, name=f"stage{s + 1}_conv{i}")(x, train)
             outs.append(x)
         return outs
 
@@ -150,13 +154,13 @@ class RadarNeXtNet(nn.Module):
             self.backbone_net = RepDWCBackbone(tuple(c.layer_nums), tuple(c.channels), c.branches, c.deploy,
                                                c.depthwise_impl)
         else:
-            self.backbone_net = DenseBackbone(tuple(c.layer_nums), tuple(c.channels))
+            self.backbone_net = DenseBackbone(tuple(c.layer_nums), tuple(c.channels), c.kernels)
         if c.neck == "fpn":
-            self.neck = SECONDFPN(c.fpn_channels)
+            self.neck = SECONDFPN(c.fpn_channels, c.kernels)
         else:
             self.neck = PANeck(tuple(c.dcn_positions), c.dcn_groups, c.dcn_offset_scale, c.branches, c.deploy,
-                               c.depthwise_impl)
-        self.head = CenterHead(len(c.classes), c.head_width, c.corner_head)
+                               c.depthwise_impl, c.kernels)
+        self.head = CenterHead(len(c.classes), c.head_width, c.corner_head, c.kernels)
 
     def encode(self, points, mask, coords, train: bool = False, origin=None):
         """Pillar feature net + scatter: the BEV pseudo-image (B, nx, ny, 64). `origin` (B, 2), if

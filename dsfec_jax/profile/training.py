@@ -1,0 +1,492 @@
+"""Training throughput of zoo models (`dsfec bench --train`): frames/s of the whole jitted train
+step, with its parts (eval forward, train-mode forward, fwd + bwd), compile times kept apart,
+achieved GFLOP/s against an sgemm peak measured in the same run, and where a step's time goes.
+
+The batches are real training batches, made as training makes them (train/fit.py): frames of the
+family's embedded benchmark, augmented, pillarized for a training window of `window` cells and
+given the family's targets by `data.batches.BatchStream`. A few are built before any timing, so
+host work is not in the device figures. A family whose network takes the window's origin as an
+input (Family.origin_input) trains every window with one network, so its batches come from
+several windows; the others compile one step per window (all of one shape), so their batches
+all come from the first window.
+
+Each timed program is compiled ahead (`jax.jit(f).lower(...).compile()`, timed: the compile
+time), then every program of every config, and the two sgemm references (XLA's and numpy's
+2048^2 float32 matmul: the machine peak), is called once per repetition in one interleaved loop,
+so box noise hits all of them alike; the figures are medians after warm-up. Then a few steps are
+traced with the XLA profiler and their time split by module, phase and op (op_breakdown.py).
+`run` measures each (model, thread count) in a fresh worker process pinned to that many CPUs
+before XLA starts (core/threads.py; as deploy/bench/workers.py does), so models do not disturb
+each other and the thread count is XLA's pool size.
+
+`--compare FIELD=VALUE` measures a second config of each model (the default with those fields
+overridden) in the same interleaved loop, and reports compare / default time ratios: a
+formulation switch measured before against after in one run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import zoo
+from ..core import atomic
+from ..core import threads as thread_control
+from ..core.defaults import RUN_PILLARS
+from . import counting, op_breakdown
+
+PROGRAMS = ("eval_forward", "train_forward", "fwd_bwd", "step")
+SGEMM_N = 2048
+STEP_SCHEDULE = "quick"  # the optimizer (clip + AdamW) is the same chain in every schedule; only the rate differs
+RECORD = Path(__file__).parent / "records" / "train_bench.json"
+README_START, README_END = "<!-- train-bench:start -->", "<!-- train-bench:end -->"
+
+FLOPS_CONVENTION = (
+    "forward GFLOPs: the profiler's analytic count (profile/counting.py: 2 x MACs of conv/deconv/linear layers, "
+    "MobileOne blocks in their fused form, pillar net on all slots) of one batch; train GFLOPs = 3 x forward "
+    "(the backward costs about twice the forward: one product for the input gradient, one for the weight "
+    "gradient; Kaplan et al. 2020, arXiv:2001.08361, sec. 2.1); XLA GFLOPs: compiled.cost_analysis() of each "
+    "program (includes elementwise work, the loss and the optimizer)")
+PEAK_CONVENTION = (f"the faster of two {SGEMM_N} x {SGEMM_N} float32 matmuls (2 n^3 FLOPs), XLA's (jitted) and "
+                   "numpy's BLAS, each timed in the same interleaved loop, process and thread count")
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """What is measured: `batch` frames per step on `window`-cell training windows (None: the
+    whole grid) with `max_pillars` slots; `repeats` timed repetitions after `warmup`; the timed
+    calls cycle through `distinct_batches` pre-built batches; `profile_steps` steps are traced
+    for the breakdown (none when `breakdown` is False)."""
+
+    batch: int = 8
+    window: int | None = 96
+    max_pillars: int = RUN_PILLARS
+    repeats: int = 10
+    warmup: int = 2
+    seed: int = 0
+    distinct_batches: int = 4
+    breakdown: bool = True
+    profile_steps: int = 3
+
+    def __post_init__(self):
+        for field, low in (("batch", 1), ("max_pillars", 1), ("repeats", 1), ("warmup", 0),
+                           ("distinct_batches", 1), ("profile_steps", 1)):
+            value = getattr(self, field)
+            if not isinstance(value, int) or value < low:
+                raise ValueError(f"train bench: {field}={value!r}; expected an integer >= {low}")
+        if self.window is not None and (not isinstance(self.window, int) or self.window < 1):
+            raise ValueError(f"train bench: window={self.window!r}; expected cells >= 1, or None for the whole grid")
+
+
+# ---- inputs -------------------------------------------------------------------------------------
+
+def training_batches(name: str, overrides: dict, settings: Settings) -> tuple[zoo.Detector, list[dict], int]:
+    """(the network a step trains, `distinct_batches` device batches {'inputs', 'targets'}, the
+    number of training windows), made as train/fit.py makes them."""
+    from ..data.batches import BatchStream, training_windows
+    from ..data.points.augment import AugmentConfig
+    from ..data.points.pillarize import PillarSpec
+    from ..data.points.sources import load_frames
+
+    cfg = zoo.config(name, **overrides)
+    family = zoo.family_of(cfg)
+    windows = [zoo.create(name, **{**overrides, "grid": g}) for g in training_windows(cfg.grid, settings.window)]
+    frames = load_frames(family.benchmark, "train", settings.batch * settings.distinct_batches, settings.seed,
+                         features=family.input_columns)
+    stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.targets(cfg), settings.batch,
+                         settings.seed, AugmentConfig(), origin_input=family.origin_input)
+    # cycled windows: step s trains window s % n; one network serves all windows only with origin inputs
+    stride = 1 if family.origin_input else len(windows)
+    batches = [stream.batch(k * stride) for k in range(settings.distinct_batches)]
+    if not family.origin_input and any(b["window"] != 0 for b in batches):
+        raise RuntimeError("train bench: expected every batch on the first window (BatchStream cycles windows)")
+    return windows[0], [jax.device_put({"inputs": b["inputs"], "targets": b["targets"]}) for b in batches], len(windows)
+
+
+# ---- programs -----------------------------------------------------------------------------------
+
+def compile_timed(jitted, *args) -> tuple[Any, float]:
+    """(the compiled program, seconds to lower and compile it)."""
+    start = time.perf_counter()
+    compiled = jitted.lower(*args).compile()
+    return compiled, time.perf_counter() - start
+
+
+def xla_gflops(compiled) -> float | None:
+    """XLA's FLOP count of a compiled program, or None where the backend gives none."""
+    try:
+        value = counting.xla_gflops(compiled)
+    except (KeyError, TypeError, IndexError, AttributeError, NotImplementedError):
+        return None
+    return value if np.isfinite(value) and value > 0 else None
+
+
+@dataclasses.dataclass
+class Workload:
+    """One config of one model: its compiled programs and the arguments they run on. The step
+    donates its state, so it threads its own state and the other programs keep a copy."""
+
+    label: str
+    overrides: dict
+    detector: zoo.Detector
+    windows: int
+    batches: list[dict]
+    variables: dict
+    state: dict
+    compiled: dict[str, Any]
+    compile_s: dict[str, float]
+
+    def run(self, program: str, rep: int) -> None:
+        """One call of `program` on batch `rep` (cycled), blocking until its results are ready."""
+        batch = self.batches[rep % len(self.batches)]
+        fn = self.compiled[program]
+        if program == "eval_forward":
+            out = fn(self.variables, batch["inputs"])
+        elif program == "step":
+            self.state, out = fn(self.state, batch)
+        else:
+            out = fn(self.variables["params"], self.variables["batch_stats"], batch)
+        jax.block_until_ready(out)
+
+
+def build_workload(name: str, label: str, overrides: dict, settings: Settings) -> Workload:
+    """Batches, fresh state and the four compiled programs of `name` with `overrides`."""
+    from ..train.schedules import get_schedule, optimizer
+    from ..train.step import init_state, loss_function, make_train_step
+
+    overrides = {"max_pillars": settings.max_pillars, **overrides}
+    det, batches, windows = training_batches(name, overrides, settings)
+    tx = optimizer(get_schedule(STEP_SCHEDULE, batch_size=settings.batch), 1000)
+    state = init_state(det, tx, jax.random.key(settings.seed))
+    variables = jax.tree.map(jnp.copy, {"params": state["params"], "batch_stats": state["batch_stats"]})
+    loss_fn = loss_function(det)  # train/step.py's, the function the step differentiates
+    batch = batches[0]
+    params, stats = variables["params"], variables["batch_stats"]
+    jitted = {
+        "eval_forward": (jax.jit(lambda v, x: det.apply(v, x, train=False)), (variables, batch["inputs"])),
+        "train_forward": (jax.jit(lambda p, s, b: loss_fn(p, s, b)[0]), (params, stats, batch)),
+        "fwd_bwd": (jax.jit(jax.value_and_grad(loss_fn, has_aux=True)), (params, stats, batch)),
+        "step": (make_train_step(det, tx), (state, batch)),
+    }
+    compiled, seconds = {}, {}
+    for program, (fn, args) in jitted.items():
+        compiled[program], seconds[program] = compile_timed(fn, *args)
+    return Workload(label, overrides, det, windows, batches, variables, state, compiled, seconds)
+
+
+def sgemms(n: int = SGEMM_N) -> dict[str, Callable[[], None]]:
+    """Blocking calls of an n x n float32 matmul, jitted by XLA and by numpy's BLAS (the issue
+    quotes numpy's): the machine-peak references."""
+    a = jax.random.normal(jax.random.key(1), (n, n), jnp.float32)
+    b = jax.random.normal(jax.random.key(2), (n, n), jnp.float32)
+    compiled = jax.jit(jnp.matmul).lower(a, b).compile()
+    a_np, b_np = np.asarray(a), np.asarray(b)
+    return {"xla": lambda: jax.block_until_ready(compiled(a, b)), "numpy": lambda: np.matmul(a_np, b_np)}
+
+
+# ---- timing -------------------------------------------------------------------------------------
+
+def time_interleaved(workloads: list[Workload], references: dict[str, Callable[[], None]], settings: Settings) -> dict:
+    """Per repetition: each program of each workload once, then each reference once. -> {label:
+    {program: [ms]}, 'sgemm': {reference: [ms]}} after `warmup` repetitions."""
+    samples: dict = {w.label: {p: [] for p in PROGRAMS} for w in workloads}
+    samples["sgemm"] = {k: [] for k in references}
+    for rep in range(settings.warmup + settings.repeats):
+        keep = rep >= settings.warmup
+        for w in workloads:
+            for program in PROGRAMS:
+                start = time.perf_counter()
+                w.run(program, rep)
+                if keep:
+                    samples[w.label][program].append(1e3 * (time.perf_counter() - start))
+        for reference, call in references.items():
+            start = time.perf_counter()
+            call()
+            if keep:
+                samples["sgemm"][reference].append(1e3 * (time.perf_counter() - start))
+    return samples
+
+
+def summary(ms: list[float]) -> dict:
+    return {"median": round(float(np.median(ms)), 3), "p10": round(float(np.percentile(ms, 10)), 3),
+            "p90": round(float(np.percentile(ms, 90)), 3), "n": len(ms)}
+
+
+def analytic_forward_gflops(detector, batch: int) -> float:
+    """The profiler's analytic forward count (2 x MACs) of one batch of `batch` frames."""
+    return sum(2 * macs for _, _, macs in counting.layer_macs(detector, batch)) / 1e9
+
+
+def figures(w: Workload, samples: dict, peak_gflop_per_s: float, batch: int) -> dict:
+    """Every figure of one workload from its timing samples."""
+    median = {p: float(np.median(samples[p])) for p in PROGRAMS}
+    forward = analytic_forward_gflops(w.detector, batch)
+    analytic = {"eval_forward": forward, "train_forward": forward, "fwd_bwd": 3 * forward, "step": 3 * forward}
+    xla = {p: xla_gflops(w.compiled[p]) for p in PROGRAMS}
+
+    def rate(gflops: dict) -> dict:
+        return {p: None if gflops[p] is None else _significant(gflops[p] / (median[p] / 1e3)) for p in PROGRAMS}
+
+    rates = {"analytic": rate(analytic), "xla": rate(xla)}
+    return {
+        "label": w.label, "overrides": _jsonable(w.overrides),
+        "input": {k: list(v.shape) for k, v in w.batches[0]["inputs"].items()},
+        "times_ms": {p: summary(samples[p]) for p in PROGRAMS},
+        "compile_s": {p: round(s, 2) for p, s in w.compile_s.items()},
+        "frames_per_s": round(batch / (median["step"] / 1e3), 3),
+        "fwd_bwd_over_eval": round(median["fwd_bwd"] / median["eval_forward"], 3),
+        "step_over_fwd_bwd": round(median["step"] / median["fwd_bwd"], 3),
+        "gflops": {"analytic": {p: _significant(v) for p, v in analytic.items()},
+                   "xla": {p: None if v is None else _significant(v) for p, v in xla.items()}},
+        "gflop_per_s": rates,
+        "percent_of_peak": {k: {p: None if v is None else _significant(100 * v / peak_gflop_per_s) for p, v in r.items()}
+                            for k, r in rates.items()},
+    }
+
+
+def step_breakdown(w: Workload, settings: Settings, threads: int) -> dict:
+    """The XLA profiler's breakdown of `profile_steps` traced steps (op_breakdown), with the op
+    time as a share of `threads` x the traced wall time (how busy the step kept XLA's pool)."""
+    directory = Path(tempfile.mkdtemp(prefix="dsfec-train-trace-"))
+    try:
+        reps = itertools.count()
+        start = time.perf_counter()
+        xplane = op_breakdown.capture(lambda: w.run("step", next(reps)), settings.profile_steps, directory)
+        wall_ms = 1e3 * (time.perf_counter() - start) / settings.profile_steps
+        result = op_breakdown.breakdown(w.compiled["step"].as_text(), xplane, settings.profile_steps)
+    finally:
+        shutil.rmtree(directory, ignore_errors=True)
+    busy = 100 * result["op_ms_per_step"] / (threads * wall_ms)
+    return {**result, "traced_wall_ms_per_step": round(wall_ms, 2), "busy_percent_of_threads": round(busy, 1)}
+
+
+# ---- one model, in this process -----------------------------------------------------------------
+
+def measure(name: str, settings: Settings, compare: dict | None = None, threads: int | None = None,
+            base: dict | None = None) -> dict:
+    """Every figure of model `name` (and of its `compare` config, interleaved), in this process.
+    `base`: config overrides of both configs (the tests' tiny shapes)."""
+    from ..core.environment import cpu_model, xla_threads
+    from ..core.provenance import versions
+
+    base = dict(base or {})
+    configs = [("default", base)] + ([("compare", {**base, **compare})] if compare else [])
+    workloads = [build_workload(name, label, overrides, settings) for label, overrides in configs]
+    samples = time_interleaved(workloads, sgemms(), settings)
+    rates = {k: _significant(2 * SGEMM_N**3 / 1e9 / (float(np.median(ms)) / 1e3)) for k, ms in samples["sgemm"].items()}
+    peak = max(rates.values())
+    results = [figures(w, samples[w.label], peak, settings.batch) for w in workloads]
+    if settings.breakdown:
+        for w, r in zip(workloads, results):
+            r["breakdown"] = step_breakdown(w, settings, xla_threads())
+    return {
+        "model": name, "family": zoo.family_of(name).name, "threads": threads, "windows": workloads[0].windows,
+        "settings": dataclasses.asdict(settings),
+        "sgemm": {"n": SGEMM_N, "gflop_per_s": peak, "by_reference_gflop_per_s": rates,
+                  "times_ms": {k: summary(ms) for k, ms in samples["sgemm"].items()}},
+        "configs": results, "comparison": comparison(results) if compare else None,
+        "environment": {"cpu": cpu_model(), "threads_asked": threads, "xla_threads": xla_threads(),
+                        "cpu_affinity": thread_control.available_cpus(),
+                        "versions": versions(("jax", "jaxlib", "flax", "numpy", "optax", "dsfec_jax"))},
+    }
+
+
+def comparison(results: list[dict]) -> dict:
+    """compare / default: time ratios per program (> 1: the compare config is slower) and the
+    frames/s ratio (> 1: it is faster)."""
+    default, other = results
+    return {"time_ratio_compare_over_default": {p: round(other["times_ms"][p]["median"] / default["times_ms"][p]["median"], 3)
+                                                for p in PROGRAMS},
+            "frames_per_s_ratio_compare_over_default": round(other["frames_per_s"] / default["frames_per_s"], 3)}
+
+
+# ---- workers ------------------------------------------------------------------------------------
+
+def parse_compare(text: str | None) -> dict:
+    """'FIELD=VALUE[,FIELD=VALUE]' -> {field: value}; values are Python literals where they parse
+    (as `dsfec train --set`), and a comma starts a new pair only before 'FIELD=', so tuple values
+    like stage_blocks=(1,1,3,2) stay whole."""
+    import ast
+
+    if not text:
+        return {}
+    out = {}
+    for item in re.split(r",(?=\s*[A-Za-z_]\w*\s*=)", text):
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or not key.isidentifier():
+            raise ValueError(f"--compare {text!r}: expected FIELD=VALUE[,FIELD=VALUE], got {item!r}")
+        try:
+            out[key] = ast.literal_eval(value.strip())
+        except (ValueError, SyntaxError):
+            out[key] = value.strip()
+    return out
+
+
+def check_models(models: list[str], settings: Settings, compare: dict | None) -> None:
+    """Refuse unknown models and compare fields (naming them) before any worker starts."""
+    unknown = [m for m in models if m not in zoo.available()]
+    if unknown:
+        raise ValueError(f"unknown model(s) {unknown}; available: {zoo.available()}")
+    for name in models:
+        for label, overrides in (("default config", {}), (f"--compare {_overrides_text(compare)}", compare or {})):
+            try:
+                zoo.config(name, max_pillars=settings.max_pillars, **overrides)
+            except (TypeError, ValueError) as err:
+                raise ValueError(f"{label}: {err}") from None
+
+
+def worker_main(argv=None) -> int:
+    """`python -m dsfec_jax.profile.training --model M --threads T --settings JSON [--compare JSON]
+    --out PATH`: one model in this process, pinned to T CPUs before XLA starts."""
+    import argparse
+
+    p = argparse.ArgumentParser(prog="python -m dsfec_jax.profile.training")
+    p.add_argument("--model", required=True)
+    p.add_argument("--threads", type=int, required=True)
+    p.add_argument("--settings", required=True, help="Settings as JSON")
+    p.add_argument("--compare", default=None, help="compare overrides as JSON")
+    p.add_argument("--out", required=True)
+    a = p.parse_args(argv)
+    thread_control.pin(a.threads)  # before the first jax computation: XLA sizes its pool from it
+    settings = Settings(**json.loads(a.settings))
+    record = measure(a.model, settings, json.loads(a.compare) if a.compare else None, a.threads)
+    Path(a.out).write_text(json.dumps(record))
+    return 0
+
+
+def run(models: list[str], threads: list[int], settings: Settings, compare: dict | None = None,
+        log: Callable[[str], None] = lambda line: print(line, file=sys.stderr, flush=True)) -> list[dict]:
+    """Each (model, thread count) measured in a fresh worker process -> their records."""
+    check_models(models, settings, compare)
+    for t in threads:
+        thread_control.check(t)
+    records = []
+    for t in threads:
+        for name in models:
+            log(f"train bench: {name}, {t} thread(s)" + (f", compare {compare}" if compare else ""))
+            with tempfile.TemporaryDirectory() as tmp:
+                out = Path(tmp) / "record.json"
+                cmd = [sys.executable, "-m", "dsfec_jax.profile.training", "--model", name, "--threads", str(t),
+                       "--settings", json.dumps(dataclasses.asdict(settings)), "--out", str(out)]
+                if compare:
+                    cmd += ["--compare", json.dumps(_jsonable(compare))]
+                proc = subprocess.run(cmd, env={**os.environ, "OMP_NUM_THREADS": str(t)}, capture_output=True, text=True)
+                if proc.returncode != 0:
+                    raise RuntimeError(f"train bench worker ({name}, {t} threads) failed:\n{proc.stderr[-3000:]}")
+                records.append(json.loads(out.read_text()))
+    return records
+
+
+def payload(command: str, records: list[dict], settings: Settings, compare: dict | None) -> dict:
+    """The record file's content: command, settings, conventions and every model's record."""
+    from ..core.provenance import versions
+
+    return {"command": command, "settings": dataclasses.asdict(settings), "compare": _jsonable(compare),
+            "flops_convention": FLOPS_CONVENTION, "peak_convention": PEAK_CONVENTION,
+            "versions": versions(), "records": records}
+
+
+def write(path: str | Path, content: dict) -> None:
+    atomic.write_json(path, content)
+
+
+# ---- report -------------------------------------------------------------------------------------
+
+def _f(value, digits: int = 1) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def markdown(content: dict, breakdown_rows: int = 6, full: bool = True) -> str:
+    """The figures table, the comparison table (with --compare) and each step's breakdown
+    (full=False: its module table only)."""
+    records = content["records"]
+    lines = ["| model | config | threads | train frames/s | step ms | eval fwd ms | train fwd ms | fwd+bwd ms "
+             "| fwd+bwd / eval | step GFLOP/s (3 x fwd) | % sgemm | step GFLOP/s (XLA) | % sgemm | sgemm GFLOP/s (XLA / numpy) "
+             "| compile s (step) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in records:
+        by_ref = r["sgemm"]["by_reference_gflop_per_s"]
+        for c in r["configs"]:
+            t = {p: c["times_ms"][p]["median"] for p in PROGRAMS}
+            config = "default" if c["label"] == "default" else _overrides_text(content["compare"])
+            lines.append(
+                f"| {r['model']} | {config} | {r['threads']} | {c['frames_per_s']:.2f} | {t['step']:.1f} "
+                f"| {t['eval_forward']:.1f} | {t['train_forward']:.1f} | {t['fwd_bwd']:.1f} | {c['fwd_bwd_over_eval']:.2f} "
+                f"| {_f(c['gflop_per_s']['analytic']['step'])} | {_f(c['percent_of_peak']['analytic']['step'])} "
+                f"| {_f(c['gflop_per_s']['xla']['step'])} | {_f(c['percent_of_peak']['xla']['step'])} "
+                f"| {_f(by_ref.get('xla'), 0)} / {_f(by_ref.get('numpy'), 0)} | {c['compile_s']['step']:.1f} |")
+    compared = [r for r in records if r.get("comparison")]
+    if compared:
+        lines += ["", f"Compare `{_overrides_text(content['compare'])}` against the default config "
+                      "(time ratio compare / default, same interleaved loop):", "",
+                  "| model | threads | frames/s ratio | step | fwd+bwd | train fwd | eval fwd |", "|---|---|---|---|---|---|---|"]
+        for r in compared:
+            q = r["comparison"]["time_ratio_compare_over_default"]
+            lines.append(f"| {r['model']} | {r['threads']} | {r['comparison']['frames_per_s_ratio_compare_over_default']:.3f} "
+                         f"| {q['step']:.3f} | {q['fwd_bwd']:.3f} | {q['train_forward']:.3f} | {q['eval_forward']:.3f} |")
+    s = content["settings"]
+    env = records[0]["environment"] if records else {}
+    lines += ["", f"Measured with `{content['command']}` on {env.get('cpu', '?')}, "
+                  f"jax {env.get('versions', {}).get('jax', '?')}: batch {s['batch']}, "
+                  f"{'whole-grid' if s['window'] is None else str(s['window']) + '-cell'} training windows, "
+                  f"{s['max_pillars']} pillar slots, median of {s['repeats']} interleaved repetitions after "
+                  f"{s['warmup']} warm-up. Analytic GFLOP/s count {content['flops_convention']}. Peak: "
+                  f"{content['peak_convention']}. Record: `dsfec_jax/profile/records/train_bench.json`."]
+    for r in records:
+        for c in r["configs"]:
+            if c.get("breakdown"):
+                lines += ["", f"Where a step's time goes, {r['model']} ({c['label']}, {r['threads']} threads):", "",
+                          op_breakdown.markdown(c["breakdown"], breakdown_rows, full)]
+    return "\n".join(lines)
+
+
+def check_readme(readme: str | Path) -> str:
+    """The README's text, refused (before a long run) without the train-bench markers."""
+    path = Path(readme)
+    text = path.read_text() if path.is_file() else ""
+    if README_START not in text or README_END not in text:
+        raise ValueError(f"{readme}: expected a file with the markers {README_START} and {README_END} "
+                         "around the train-bench table")
+    return text
+
+
+def update_readme(readme: str | Path, content: dict) -> None:
+    """Replace the text between the train-bench markers of `readme` with the table."""
+    text = check_readme(readme)
+    block = f"{README_START}\n{markdown(content, breakdown_rows=5, full=False)}\n{README_END}"
+    text = re.sub(re.escape(README_START) + ".*?" + re.escape(README_END), lambda _: block, text, flags=re.S)
+    atomic.write_text(readme, text)
+
+
+def _significant(x: float, digits: int = 4) -> float:
+    """`x` rounded to `digits` significant digits (a tiny test model's GFLOPs do not round to 0)."""
+    return float(f"{x:.{digits}g}")
+
+
+def _overrides_text(overrides: dict | None) -> str:
+    return ",".join(f"{k}={v}" for k, v in (overrides or {}).items())
+
+
+def _jsonable(obj):
+    from ..core.provenance import jsonable
+
+    return jsonable(obj)
+
+
+if __name__ == "__main__":
+    raise SystemExit(worker_main())

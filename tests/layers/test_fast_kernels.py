@@ -1,0 +1,116 @@
+"""The fast CPU-training formulations (layers/conv.py, kernels="fast") give the values and the
+gradients of the plain ones (kernels="plain"), layer by layer and on whole small models."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax import lax
+
+from dsfec_jax.layers import Conv, ConvTranspose, DepthwiseConv
+from dsfec_jax.layers.conv import DIMS, fast_shifted_depthwise, shifted_depthwise, subpixel_conv_transpose
+from dsfec_jax.models.dsfec.loss import LossConfig, detection_loss
+from conftest import tiny
+from train.test_train_step import toy_batch
+
+RTOL = 1e-4  # the issue's bar: relative error of gradients, float32
+
+
+def rel_err(a, b) -> float:
+    """Relative L2 error of a against b over a whole pytree."""
+    num = sum(float(jnp.sum((x - y) ** 2)) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
+    den = sum(float(jnp.sum(y ** 2)) for y in jax.tree.leaves(b))
+    return (num / den) ** 0.5
+
+
+def grads(fn, *args):
+    """Value and gradients (every argument) of sum(sin(fn(*args))): a loss whose output gradient
+    differs from pixel to pixel, so every tap and phase is exercised."""
+    loss = lambda *a: jnp.sum(jnp.sin(fn(*a)))  # noqa: E731
+    return fn(*args), jax.grad(loss, argnums=tuple(range(len(args))))(*args)
+
+
+@pytest.mark.parametrize("shape,stride", [((2, 7, 9, 3), 1), ((3, 8, 8, 4), 2), ((2, 9, 6, 5), 2),
+                                          ((1, 5, 5, 2), 3), ((3, 6, 6, 2), 1)])
+def test_depthwise_gradient_equals_autodiff(shape, stride):
+    x = jax.random.normal(jax.random.key(0), shape)
+    w = jax.random.normal(jax.random.key(1), (3, 3, shape[-1]))
+    plain_y, plain_g = grads(lambda x, w: shifted_depthwise(x, w, stride), x, w)
+    fast_y, fast_g = grads(lambda x, w: fast_shifted_depthwise(x, w, stride), x, w)
+    np.testing.assert_array_equal(fast_y, plain_y)
+    assert rel_err(fast_g, plain_g) < RTOL
+    assert rel_err(jax.jit(jax.grad(lambda x, w: jnp.sum(jnp.sin(fast_shifted_depthwise(x, w, stride))),
+                                    (0, 1)))(x, w), plain_g) < RTOL
+
+
+@pytest.mark.parametrize("kernel", [1, 2, 3, 4])
+@pytest.mark.parametrize("stride", [1, 2, 3])
+def test_subpixel_upsampling_equals_conv_transpose(kernel, stride):
+    x = jax.random.normal(jax.random.key(kernel), (2, 5, 7, 3))
+    w = jax.random.normal(jax.random.key(stride), (kernel, kernel, 3, 4))
+    plain = lambda x, w: lax.conv_transpose(x, w, (stride, stride), "SAME", dimension_numbers=DIMS)  # noqa: E731
+    plain_y, plain_g = grads(plain, x, w)
+    fast_y, fast_g = grads(lambda x, w: subpixel_conv_transpose(x, w, stride), x, w)
+    assert fast_y.shape == plain_y.shape == (2, 5 * stride, 7 * stride, 4)
+    np.testing.assert_allclose(fast_y, plain_y, rtol=1e-5, atol=1e-5)
+    assert rel_err(fast_g, plain_g) < RTOL
+
+
+@pytest.mark.parametrize("module", [lambda k: Conv(6, 1, 1, use_bias=True, kernels=k),
+                                    lambda k: Conv(6, 1, 2, kernels=k),
+                                    lambda k: Conv(6, 3, 2, kernels=k),
+                                    lambda k: DepthwiseConv(3, 2, kernels=k),
+                                    lambda k: ConvTranspose(5, 3, 2, kernels=k)])
+def test_each_layer_fast_equals_plain(module):
+    x = jax.random.normal(jax.random.key(0), (2, 7, 6, 4))
+    variables = module("plain").init(jax.random.key(1), x)
+
+    def run(kernels):
+        return grads(lambda v, x: module(kernels).apply(v, x), variables, x)
+
+    (plain_y, plain_g), (fast_y, fast_g) = run("plain"), run("fast")
+    np.testing.assert_allclose(fast_y, plain_y, rtol=1e-5, atol=1e-5)
+    assert rel_err(fast_g, plain_g) < RTOL
+
+
+def test_an_unknown_kernels_value_names_the_field():
+    with pytest.raises(ValueError, match="kernels='quick'.*'fast', 'plain'"):
+        Conv(4, 1, kernels="quick").init(jax.random.key(0), jnp.zeros((1, 4, 4, 2)))
+    with pytest.raises(ValueError, match="kernels"):
+        tiny("dsfec_s", kernels="quick")
+
+
+@pytest.fixture
+def float64():
+    """Whole networks in float64: a 32 x 32 toy batch leaves batch norm nearly degenerate (few
+    occupied cells), which turns float32 rounding into ~1e-3 differences between any two
+    summation orders (the baseline's, measured); in float64 the two formulations agree to ~1e-13."""
+    jax.config.update("jax_enable_x64", True)
+    yield
+    jax.config.update("jax_enable_x64", False)
+
+
+@pytest.mark.parametrize("name", ["dsfec_s", "baseline"])
+def test_whole_model_training_gradients_equal(name, float64):
+    """The train-mode loss of a whole small network (FEC or PointPillars encoder, DSConv or
+    residual backbone, deconv neck, heads) has the same gradients with either formulation."""
+    as64 = lambda tree: jax.tree.map(lambda a: a.astype(jnp.float64) if a.dtype == jnp.float32 else a, tree)  # noqa: E731
+    batch = as64(toy_batch(tiny(name)))
+    plain, fast = tiny(name, kernels="plain"), tiny(name, kernels="fast")
+    variables = as64(plain.init(jax.random.key(0)))
+    loss_cfg = LossConfig()
+
+    def loss_and_grads(det):
+        def loss(params):
+            outputs, _ = det.apply({**variables, "params": params}, batch["inputs"], train=True)
+            return detection_loss(outputs, batch["targets"], loss_cfg)[0]
+        return jax.jit(jax.value_and_grad(loss))(variables["params"])
+
+    (plain_loss, plain_g), (fast_loss, fast_g) = loss_and_grads(plain), loss_and_grads(fast)
+    assert jax.tree.leaves(fast_g)[0].dtype == jnp.float64
+    assert float(fast_loss) == pytest.approx(float(plain_loss), rel=1e-10)
+    assert rel_err(fast_g, plain_g) < RTOL
+    # and leaf by leaf, so that no small layer hides behind a large one
+    for (path, p), f in zip(jax.tree_util.tree_flatten_with_path(plain_g)[0], jax.tree.leaves(fast_g)):
+        scale = max(float(jnp.abs(p).max()), 1e-12)
+        assert float(jnp.abs(f - p).max()) / scale < RTOL, jax.tree_util.keystr(path)
