@@ -28,6 +28,7 @@ import collections
 import dataclasses
 import re
 import tempfile
+import time
 from pathlib import Path
 from typing import Callable
 
@@ -199,17 +200,20 @@ def instruction_times(xplane: str | Path, names) -> collections.Counter:
     return times
 
 
-def capture(run_once: Callable[[], None], steps: int, directory: str | Path | None = None) -> Path:
-    """Trace `steps` calls of `run_once` (each must block until its results are ready) -> the
-    .xplane.pb written. Warm the program up before: compiles and first-call allocations would
-    otherwise land in the trace."""
+def capture(run_once: Callable[[], None], steps: int, directory: str | Path | None = None) -> tuple[Path, float]:
+    """Trace `steps` calls of `run_once` (each must block until its results are ready) -> (the
+    .xplane.pb written, wall seconds of the calls alone: starting and stopping the profiler takes
+    about a second, which a tiny program's steps would not amortise). Warm the program up
+    before: compiles and first-call allocations would otherwise land in the trace."""
     import jax
 
     directory = Path(directory or tempfile.mkdtemp(prefix="dsfec-xplane-"))
     with jax.profiler.trace(str(directory)):
+        start = time.perf_counter()
         for _ in range(steps):
             run_once()
-    return xplane_file(directory)
+        seconds = time.perf_counter() - start
+    return xplane_file(directory), seconds
 
 
 def breakdown(hlo_text: str, xplane: str | Path, steps: int, top: int = TOP_ROWS) -> dict:

@@ -264,9 +264,8 @@ def step_breakdown(w: Workload, settings: Settings, threads: int) -> dict:
     directory = Path(tempfile.mkdtemp(prefix="dsfec-train-trace-"))
     try:
         reps = itertools.count()
-        start = time.perf_counter()
-        xplane = op_breakdown.capture(lambda: w.run("step", next(reps)), settings.profile_steps, directory)
-        wall_ms = 1e3 * (time.perf_counter() - start) / settings.profile_steps
+        xplane, seconds = op_breakdown.capture(lambda: w.run("step", next(reps)), settings.profile_steps, directory)
+        wall_ms = 1e3 * seconds / settings.profile_steps
         result = op_breakdown.breakdown(w.compiled["step"].as_text(), xplane, settings.profile_steps)
     finally:
         shutil.rmtree(directory, ignore_errors=True)

@@ -105,7 +105,8 @@ def test_the_breakdown_finds_a_named_modules_ops(tmp_path):
 
     compiled = jax.jit(jax.grad(loss)).lower(params).compile()
     jax.block_until_ready(compiled(params))
-    xplane = op_breakdown.capture(lambda: jax.block_until_ready(compiled(params)), 2, tmp_path)
+    xplane, seconds = op_breakdown.capture(lambda: jax.block_until_ready(compiled(params)), 2, tmp_path)
+    assert seconds > 0
     result = op_breakdown.breakdown(compiled.as_text(), xplane, 2)
     modules = {(r["phase"], r["module"]) for r in result["by_module"]}
     assert ("fwd", "proj") in modules and ("bwd", "proj") in modules
