@@ -74,7 +74,8 @@ class DepthwiseConv(nn.Module):
 
     `impl="shifted"` sums K*K shifted, strided slices (XLA on CPU runs this ~7x faster than a
     grouped conv); `impl="grouped"` is `feature_group_count=C`, which exports to ONNX as a
-    single `Conv(group=C)`. Both read the same (K, K, 1, C) kernel.
+    single `Conv(group=C)`. Both read the same (K, K, 1, C) kernel. With `kernels="fast"` the
+    shifted form has a hand-written gradient (`fast_shifted_depthwise`); "plain" is autodiff's.
     """
 
     kernel: int = 3
@@ -129,9 +130,9 @@ def _tap(xp, i: int, j: int, ho: int, wo: int, stride: int):
 DW_GRAD_CHUNK = 2  # images per pass of the kernel-gradient sums: one pair's taps stay in cache
 
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(2,))
-def fast_shifted_depthwise(x_BxHxWxC, w_KxKxC, stride: int):
-    """`shifted_depthwise` (TF 'SAME') with a hand-written gradient of the same value.
+@functools.partial(jax.custom_vjp, nondiff_argnums=(2, 3))
+def fast_shifted_depthwise(x_BxHxWxC, w_KxKxC, stride: int, pads: tuple[int, int] | None = None):
+    """`shifted_depthwise` (same `pads`, default TF 'SAME') with a hand-written gradient of the same value.
 
     Autodiff of the shifted form keeps all K*K shifted views of the input for the backward pass
     (9 activation-sized copies per 3x3 layer, the largest memory traffic of a DSFEC training
@@ -139,23 +140,27 @@ def fast_shifted_depthwise(x_BxHxWxC, w_KxKxC, stride: int):
     the (stride-dilated) output gradient, and the kernel gradient re-reads each tap view, summed
     over a few images at a time so they stay in cache.
     """
-    return shifted_depthwise(x_BxHxWxC, w_KxKxC, stride)
+    return shifted_depthwise(x_BxHxWxC, w_KxKxC, stride, pads)
 
 
-def _depthwise_fwd(x_BxHxWxC, w_KxKxC, stride: int):
-    return shifted_depthwise(x_BxHxWxC, w_KxKxC, stride), (x_BxHxWxC, w_KxKxC)
+def _depthwise_fwd(x_BxHxWxC, w_KxKxC, stride: int, pads):
+    return shifted_depthwise(x_BxHxWxC, w_KxKxC, stride, pads), (x_BxHxWxC, w_KxKxC)
 
 
-def _depthwise_bwd(stride: int, residuals, g_BxHoxWoxC):
+def _depthwise_bwd(stride: int, pads, residuals, g_BxHoxWoxC):
     x, w = residuals
-    return _depthwise_input_grad(g_BxHoxWoxC, w, x.shape, stride), _depthwise_kernel_grad(x, g_BxHoxWoxC, w.shape[0], stride)
+    return (_depthwise_input_grad(g_BxHoxWoxC, w, x.shape, stride, pads),
+            _depthwise_kernel_grad(x, g_BxHoxWoxC, w.shape[0], stride, pads))
 
 
-def _depthwise_input_grad(g, w_KxKxC, x_shape, stride: int):
+def _depthwise_input_grad(g, w_KxKxC, x_shape, stride: int, pads):
     """d x: output o*s + t - pad_low reads input row m, so m gets g[o] * w[t]: a stride-1 conv of
     g dilated by s with the flipped kernel, padded to cover every input row."""
     k = w_KxKxC.shape[0]
-    (low_h, _), (low_w, _) = same_pads(x_shape[1], k, stride), same_pads(x_shape[2], k, stride)
+    if pads is None:
+        (low_h, _), (low_w, _) = same_pads(x_shape[1], k, stride), same_pads(x_shape[2], k, stride)
+    else:
+        low_h = low_w = pads[0]
     ho, wo = g.shape[1], g.shape[2]
     pad_h = (k - 1 - low_h, x_shape[1] - 1 + low_h - (ho - 1) * stride, stride - 1)
     pad_w = (k - 1 - low_w, x_shape[2] - 1 + low_w - (wo - 1) * stride, stride - 1)
@@ -163,9 +168,9 @@ def _depthwise_input_grad(g, w_KxKxC, x_shape, stride: int):
     return shifted_depthwise(gd, w_KxKxC[::-1, ::-1], 1, pads=(0, 0))
 
 
-def _depthwise_kernel_grad(x, g, k: int, stride: int):
+def _depthwise_kernel_grad(x, g, k: int, stride: int, pads):
     """d w[i, j] = sum over images and pixels of tap (i, j) times g."""
-    xp, ho, wo = _padded(x, k, stride, None)
+    xp, ho, wo = _padded(x, k, stride, pads)
 
     def chunk(pair):
         xp_c, g_c = pair

@@ -19,17 +19,24 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from .conv import DIMS, DepthwiseImpl, kernel_init, shifted_depthwise
+from .conv import DIMS, DepthwiseImpl, Kernels, fast_shifted_depthwise, kernel_init, shifted_depthwise
 
 BN_EPS = 1e-5        # PyTorch BatchNorm2d defaults (the public RadarNeXt code is PyTorch)
 BN_MOMENTUM = 0.9    # flax momentum = 1 - PyTorch momentum 0.1
 
 
-def rep_conv(x_BxHxWxC, w_KxKxIxO, stride: int, groups: int, impl: DepthwiseImpl = "grouped"):
-    """Conv with symmetric K // 2 padding; a depthwise kernel may use the fast shifted form."""
+def rep_conv(x_BxHxWxC, w_KxKxIxO, stride: int, groups: int, impl: DepthwiseImpl = "grouped",
+             kernels: Kernels = "fast"):
+    """Conv with symmetric K // 2 padding; a depthwise kernel may use the fast shifted form.
+    kernels="fast" (layers.conv): the shifted form with its hand-written gradient (autodiff keeps
+    all K*K shifted copies) and a dense 1x1 conv as a matmul."""
     k = w_KxKxIxO.shape[0]
+    fast = kernels == "fast"
     if groups > 1 and groups == x_BxHxWxC.shape[-1] == w_KxKxIxO.shape[-1] and impl == "shifted":
-        return shifted_depthwise(x_BxHxWxC, w_KxKxIxO[:, :, 0, :], stride, (k // 2, k // 2))
+        depthwise = fast_shifted_depthwise if fast else shifted_depthwise
+        return depthwise(x_BxHxWxC, w_KxKxIxO[:, :, 0, :], stride, (k // 2, k // 2))
+    if fast and k == 1 and groups == 1:
+        return jnp.dot(x_BxHxWxC[:, ::stride, ::stride], w_KxKxIxO[0, 0])
     return lax.conv_general_dilated(x_BxHxWxC, w_KxKxIxO, (stride, stride), [(k // 2, k // 2)] * 2,
                                     dimension_numbers=DIMS, feature_group_count=groups)
 
@@ -50,6 +57,7 @@ class MobileOneBlock(nn.Module):
     branches: int = 1            # k, num_conv_branches (RadarNeXt: 1)
     deploy: bool = False
     depthwise_impl: DepthwiseImpl = "shifted"
+    kernels: Kernels = "fast"
 
     def groups(self, cin: int) -> int:
         if self.depthwise and cin != self.features:
@@ -64,7 +72,7 @@ class MobileOneBlock(nn.Module):
         cin = x_BxHxWxC.shape[-1]
         g, k = self.groups(cin), self.kernel
         shape = lambda kk: (kk, kk, cin // g, self.features)  # noqa: E731
-        conv = lambda w: rep_conv(x_BxHxWxC, w, self.stride, g, self.depthwise_impl)  # noqa: E731
+        conv = lambda w: rep_conv(x_BxHxWxC, w, self.stride, g, self.depthwise_impl, self.kernels)  # noqa: E731
         if self.deploy:
             y = conv(self.param("kernel", kernel_init, shape(k))) + self.param("bias", nn.initializers.zeros,
                                                                               (self.features,))
@@ -91,13 +99,15 @@ class RepDWSeparable(nn.Module):
     branches: int = 1
     deploy: bool = False
     depthwise_impl: DepthwiseImpl = "shifted"
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, x_BxHxWxC, train: bool = False):
         cin = x_BxHxWxC.shape[-1]
         x = MobileOneBlock(cin, 3, self.stride, True, self.branches, self.deploy, self.depthwise_impl,
-                           name="dw")(x_BxHxWxC, train)
-        return MobileOneBlock(self.features, 1, 1, False, self.branches, self.deploy, name="pw")(x, train)
+                           self.kernels, name="dw")(x_BxHxWxC, train)
+        return MobileOneBlock(self.features, 1, 1, False, self.branches, self.deploy, kernels=self.kernels,
+                              name="pw")(x, train)
 
 
 def _fuse(kernel, bn_params, bn_stats):

@@ -23,6 +23,16 @@ def rel_err(a, b) -> float:
     return (num / den) ** 0.5
 
 
+def assert_leaves_close(fast, plain):
+    """Leaf by leaf, so that no small layer hides behind a large one. A leaf whose gradient is
+    zero in exact arithmetic (a conv bias right before batch norm) holds only rounding (~1e-14
+    in float64): it is held to the whole tree's scale instead of its own."""
+    floor = 1e-9 * max(float(jnp.abs(p).max()) for p in jax.tree.leaves(plain))
+    for (path, p), f in zip(jax.tree_util.tree_flatten_with_path(plain)[0], jax.tree.leaves(fast)):
+        scale = max(float(jnp.abs(p).max()), floor)
+        assert float(jnp.abs(f - p).max()) / scale < RTOL, jax.tree_util.keystr(path)
+
+
 def grads(fn, *args):
     """Value and gradients (every argument) of sum(sin(fn(*args))): a loss whose output gradient
     differs from pixel to pixel, so every tap and phase is exercised."""
@@ -41,6 +51,18 @@ def test_depthwise_gradient_equals_autodiff(shape, stride):
     assert rel_err(fast_g, plain_g) < RTOL
     assert rel_err(jax.jit(jax.grad(lambda x, w: jnp.sum(jnp.sin(fast_shifted_depthwise(x, w, stride))),
                                     (0, 1)))(x, w), plain_g) < RTOL
+
+
+@pytest.mark.parametrize("shape,stride,kernel", [((2, 8, 8, 3), 2, 3), ((3, 7, 9, 2), 1, 3), ((2, 9, 9, 2), 2, 5)])
+def test_depthwise_gradient_with_symmetric_pads(shape, stride, kernel):
+    """MobileOne's padding (K // 2 on both sides, PyTorch's), not TF 'SAME'."""
+    x = jax.random.normal(jax.random.key(2), shape)
+    w = jax.random.normal(jax.random.key(3), (kernel, kernel, shape[-1]))
+    pads = (kernel // 2, kernel // 2)
+    plain_y, plain_g = grads(lambda x, w: shifted_depthwise(x, w, stride, pads), x, w)
+    fast_y, fast_g = grads(lambda x, w: fast_shifted_depthwise(x, w, stride, pads), x, w)
+    np.testing.assert_array_equal(fast_y, plain_y)
+    assert rel_err(fast_g, plain_g) < RTOL
 
 
 @pytest.mark.parametrize("kernel", [1, 2, 3, 4])
@@ -111,6 +133,27 @@ def test_whole_model_training_gradients_equal(name, float64):
     assert float(fast_loss) == pytest.approx(float(plain_loss), rel=1e-10)
     assert rel_err(fast_g, plain_g) < RTOL
     # and leaf by leaf, so that no small layer hides behind a large one
-    for (path, p), f in zip(jax.tree_util.tree_flatten_with_path(plain_g)[0], jax.tree.leaves(fast_g)):
-        scale = max(float(jnp.abs(p).max()), 1e-12)
-        assert float(jnp.abs(f - p).max()) / scale < RTOL, jax.tree_util.keystr(path)
+    assert_leaves_close(fast_g, plain_g)
+
+
+@pytest.mark.parametrize("name", ["radarnext_fpn", "radarnext_mdfen"])
+def test_radarnext_training_gradients_equal(name, float64):
+    """RadarNeXt (MobileOne depthwise with symmetric pads, 1x1 MobileOne convs as matmuls,
+    kernel == stride deconvs): train-mode output gradients equal with either formulation."""
+    from dsfec_jax import zoo
+    from dsfec_jax.core.grid import Grid
+
+    tiny_grid = dict(grid=Grid((0.0, 5.12), (-2.56, 2.56), (-3.0, 2.0), 0.16), max_pillars=128)  # 32 x 32
+    plain, fast = zoo.create(name, kernels="plain", **tiny_grid), zoo.create(name, kernels="fast", **tiny_grid)
+    as64 = lambda tree: jax.tree.map(lambda a: a.astype(jnp.float64) if a.dtype == jnp.float32 else a, tree)  # noqa: E731
+    variables, inputs = as64(plain.init(jax.random.key(0))), as64(plain.config.dummy_inputs(2, occupancy=0.3))
+
+    def output_grads(det):
+        def loss(params):
+            outputs, _ = det.apply({**variables, "params": params}, inputs, train=True)
+            return sum(jnp.sum(jnp.sin(o)) for o in jax.tree.leaves(outputs))
+        return jax.jit(jax.grad(loss))(variables["params"])
+
+    plain_g, fast_g = output_grads(plain), output_grads(fast)
+    assert rel_err(fast_g, plain_g) < RTOL
+    assert_leaves_close(fast_g, plain_g)

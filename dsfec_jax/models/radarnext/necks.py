@@ -64,7 +64,7 @@ class PANeck(nn.Module):
         return DCNv3(x.shape[-1], self.dcn_groups, 3, self.dcn_offset_scale, name=f"dcn{position}")(x)
 
     def _rep(self, features: int, name: str):
-        return RepDWSeparable(features, 1, self.branches, self.deploy, self.depthwise_impl, name=name)
+        return RepDWSeparable(features, 1, self.branches, self.deploy, self.depthwise_impl, self.kernels, name=name)
 
     @nn.compact
     def __call__(self, stages: list, train: bool = False):

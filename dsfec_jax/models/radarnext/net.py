@@ -113,13 +113,14 @@ class RepDWCBackbone(nn.Module):
     branches: int = 1
     deploy: bool = False
     depthwise_impl: str = "shifted"
+    kernels: str = "fast"  # layers.conv.Kernels
 
     @nn.compact
     def __call__(self, x, train: bool = False) -> list:
         outs = []
         for s, (n, c) in enumerate(zip(self.layer_nums, self.channels)):
             for i in range(n):
-                x = RepDWSeparable(c, 2 if i == 0 else 1, self.branches, self.deploy, self.depthwise_impl,
+                x = RepDWSeparable(c, 2 if i == 0 else 1, self.branches, self.deploy, self.depthwise_impl, self.kernels,
                                    name=f"stage{s + 1}_layer{i}")(x, train)
             outs.append(x)
         return outs
@@ -152,7 +153,7 @@ class RadarNeXtNet(nn.Module):
         self.pillar_net = PillarFeatureNet(c.grid, "pointpillars", (c.pillar_filters,), "relu")
         if c.backbone == "rep_dwc":
             self.backbone_net = RepDWCBackbone(tuple(c.layer_nums), tuple(c.channels), c.branches, c.deploy,
-                                               c.depthwise_impl)
+                                               c.depthwise_impl, c.kernels)
         else:
             self.backbone_net = DenseBackbone(tuple(c.layer_nums), tuple(c.channels), c.kernels)
         if c.neck == "fpn":
