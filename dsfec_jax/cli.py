@@ -104,7 +104,9 @@ def parse(argv=None) -> argparse.Namespace:
     b.add_argument("--batch", type=positive_int, default=None, help="--train: frames per step (default 8)")
     b.add_argument("--window", type=non_negative_int, default=None,
                    help="--train: training-window cells, 0 = the whole grid (default 96)")
-    b.add_argument("--max-pillars", type=positive_int, default=None, help=f"--train: pillar slots (default {RUN_PILLARS})")
+    b.add_argument("--max-pillars", type=positive_int, default=None,
+                   help=f"--train: at most this many pillar slots (default {RUN_PILLARS}), sized to the data as training does")
+    b.add_argument("--fixed-pillars", action="store_true", help="--train: exactly --max-pillars slots, not sized to the data")
     b.add_argument("--compare", default=None, metavar="FIELD=VALUE[,FIELD=VALUE]",
                    help="--train: also measure each model with these config overrides, interleaved, and report the ratios")
     b.add_argument("--no-breakdown", action="store_true", help="--train: skip the XLA-profiler breakdown of the step")
@@ -287,7 +289,7 @@ def bench_threads(text: str) -> list[int]:
     return threads
 
 
-TRAIN_BENCH_FLAGS = ("batch", "window", "max_pillars", "compare", "no_breakdown", "readme")
+TRAIN_BENCH_FLAGS = ("batch", "window", "max_pillars", "fixed_pillars", "compare", "no_breakdown", "readme")
 
 
 def bench_models(text: str) -> list[str]:
@@ -303,7 +305,7 @@ def run_train_bench(args) -> int:
     try:
         settings = training.Settings(batch=args.batch or 8, window=window or None, max_pillars=args.max_pillars or RUN_PILLARS,
                                      repeats=args.repeats or 10, warmup=2 if args.warmup is None else args.warmup,
-                                     breakdown=not args.no_breakdown)
+                                     breakdown=not args.no_breakdown, size_pillars=not args.fixed_pillars)
         compare = training.parse_compare(args.compare) or None
         if args.readme:
             training.check_readme(args.readme)

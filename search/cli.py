@@ -27,6 +27,8 @@ def parser(prog: str, doc: str, base: str = "dsfec_l", strategy: str = "train") 
     p.add_argument("--seeds", type=int, default=1, help="repeat each candidate with this many seeds")
     p.add_argument("--strategy", default=strategy, choices=("train", "oneshot"),
                    help=f"train every candidate, or one weight-sharing supernet over a depth axis (default {strategy})")
+    p.add_argument("--supernet-steps", type=int, default=None,
+                   help="--strategy oneshot: train the supernet this many steps (default: the profile's)")
     p.add_argument("--backend", default="local", choices=("local", "ray"), help="run trials here or as Ray Tune trials")
     p.add_argument("--retry-failed", action="store_true", help="re-run trials journaled as failed")
     p.add_argument("--address", default=None, help="with --backend ray: an existing cluster (default: start a local Ray)")
@@ -48,9 +50,14 @@ def run_search(args, name: str, candidates_fn, title: str, base_label: str | Non
         candidates = candidates_fn()
         if args.strategy == "oneshot":
             supernet_overrides(candidates, hooks(args.base).field)
+            if args.supernet_steps is not None and args.supernet_steps < 1:
+                raise SearchSpaceError(f"--supernet-steps {args.supernet_steps}: expected a step count >= 1")
             if args.backend != "local":
                 raise SearchSpaceError("--strategy oneshot trains one supernet in this process; "
                                        "--backend ray is for --strategy train")
+        elif args.supernet_steps is not None:
+            raise SearchSpaceError("--supernet-steps is for --strategy oneshot (--strategy train trains each "
+                                   "candidate for the profile's schedule)")
     except (SearchSpaceError, KeyError) as err:
         sys.exit(str(err).strip("'\""))
     args.data = args.data or recipe.data
@@ -60,7 +67,7 @@ def run_search(args, name: str, candidates_fn, title: str, base_label: str | Non
                                                 "profile": args.profile, "data": args.data, "seeds": args.seeds,
                                                 "strategy": args.strategy, "command": command,
                                                 "candidates": [c["label"] for c in candidates]})
-    trials = [make_trial(args.base, c, args.profile, args.data, seed, args.strategy)
+    trials = [make_trial(args.base, c, args.profile, args.data, seed, args.strategy, args.supernet_steps)
               for c in candidates for seed in range(args.seeds)]
     if args.strategy == "oneshot":
         for seed in range(args.seeds):

@@ -16,6 +16,7 @@ training batches, because the supernet's running statistics mix every subnet's a
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import time
 from pathlib import Path
@@ -30,7 +31,7 @@ from dsfec_jax.core.environment import environment
 from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.data.batches import BatchStream, collate
 from dsfec_jax.data.prefetch import Prefetcher
-from dsfec_jax.data.points.pillarize import PillarSpec
+from dsfec_jax.data.points.pillarize import PillarSpec, pillar_budget
 from dsfec_jax.data.points.sources import load_frames
 from dsfec_jax.evaluate import validate
 from dsfec_jax.predict import Predictor
@@ -170,15 +171,19 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
     family, net, fixed = zoo.family_of(base), hooks(base), recipe.model_overrides()
     supernet = zoo.create(base, **supernet_overrides(trials, net.field), **fixed)
     frames = load_frames(data, "train", recipe.train_frames, seed=0, features=family.input_columns)
-    cfg = supernet.config
+    # trained and recalibrated with pillar slots sized to the training frames (pillar_budget: the
+    # same inputs, less padding), validated with the recipe's slots
+    trainee = zoo.create(base, **supernet_overrides(trials, net.field), **{
+        **fixed, "max_pillars": pillar_budget(frames, supernet.config.max_pillars)})
+    cfg = trainee.config
     stream = BatchStream(frames, PillarSpec.of(cfg), family.targets(cfg), recipe.schedule.batch_size, seed,
                          origin_input=family.origin_input)
     depths = [jnp.asarray(getattr(zoo.config(base, **t["overrides"], **fixed), net.field), jnp.int32) for t in trials]
-    steps = recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
-    state, supernet_s, supernet_cpu = _supernet(supernet, stream, depths, recipe, steps, seed,
+    steps = trials[0].get("supernet_steps") or recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
+    state, supernet_s, supernet_cpu = _supernet(trainee, stream, depths, recipe, steps, seed,
                                                 journal.path.parent / supernet_file(trials), log,
                                                 initial_variables(trials[0].get("init", "scratch")))
-    recalibrate = recalibrator(supernet)
+    recalibrate = recalibrator(trainee)
     calib = calibration_batches(stream, PillarSpec.of(cfg))
     val = load_frames(data, "val", recipe.val_frames, seed=0, features=family.input_columns)
     predictor = SubnetPredictor(supernet, None, depths[0])
@@ -186,19 +191,30 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
         if trial["key"] not in todo:
             continue
         t1, c1 = time.perf_counter(), time.process_time()
-        stats = recalibrate({"params": state["params"], "batch_stats": state["batch_stats"]}, calib, depth)
+        phases = {}  # wall seconds of each part of a candidate's evaluation (what a sweep's time goes to)
+        with _timed(phases, "recalibrate"):
+            stats = recalibrate({"params": state["params"], "batch_stats": state["batch_stats"]}, calib, depth)
         predictor.variables, predictor.depth = {"params": state["params"], "batch_stats": stats}, depth
-        scores, tables = validate(family.metric.name, predictor, val, match_classes(family))
-        costs = measured_costs(journal, trial) or profile(
-            [zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats, warmup=1,
-            light=recipe.light_profile)[0]
+        with _timed(phases, "validate"):
+            scores, tables = validate(family.metric.name, predictor, val, match_classes(family))
+        with _timed(phases, "profile"):
+            costs = measured_costs(journal, trial) or profile(
+                [zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats, warmup=1,
+                light=recipe.light_profile)[0]
         journal.append({**trial, "status": "ok", **measured(scores, tables, costs),
                         "supernet": {net.field: list(getattr(cfg, net.field)), "steps": steps,
                                      "wall_s": round(supernet_s, 1), "cpu_s": round(supernet_cpu, 1)},
                         "wall_s": round(supernet_s / len(trials) + time.perf_counter() - t1, 1),
                         "cpu_s": round(supernet_cpu / len(trials) + time.process_time() - c1, 1),
-                        "environment": environment()})
+                        "phases_s": phases, "environment": environment()})
         log(f"    {trial['label']}: {family.metric.headline} {scores[family.metric.headline]:.2f} (inherited weights)")
+
+
+@contextlib.contextmanager
+def _timed(into: dict, phase: str):
+    start = time.perf_counter()
+    yield
+    into[phase] = round(time.perf_counter() - start, 1)
 
 
 def measured_costs(journal: Journal, trial: dict) -> dict | None:

@@ -2,7 +2,7 @@
 
 `smoke` checks the whole pipeline in about a minute per trial; its numbers mean nothing. `quick`
 fits a sweep into ~15 minutes on a 2-core CPU: for DSFEC a 32 m x 32 m grid in front of the
-sensor (64 x 64 cells), 150 steps of batch 4 per trial (240 for a whole one-shot supernet) and
+sensor (64 x 64 cells), 150 steps of batch 4 per trial (480 for a whole one-shot supernet, `--supernet-steps` to change it) and
 100 validation frames, depth sweeps starting from the base's shipped weights (search.inherit);
 its mAP differences below ~1.5 points are noise (README, "What the quick stage-2 sweep
 measures"). For RadarNeXt: the synthetic 4D (View-of-Delft-like) benchmark, RadarNeXt's schedule,

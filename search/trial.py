@@ -29,13 +29,19 @@ def trial_key(spec: dict) -> str:
         ident["strategy"] = spec["strategy"]
     if spec.get("init", "scratch") != "scratch":
         ident["init"] = spec["init"]
+    if spec.get("supernet_steps") is not None:  # a one-shot supernet of another length is another trial
+        ident["supernet_steps"] = spec["supernet_steps"]
     return hashlib.sha1(json.dumps(jsonable(ident), sort_keys=True).encode()).hexdigest()[:12]
 
 
-def make_trial(base: str, candidate: dict, recipe: str, data: str, seed: int, strategy: str = "train") -> dict:
+def make_trial(base: str, candidate: dict, recipe: str, data: str, seed: int, strategy: str = "train",
+               supernet_steps: int | None = None) -> dict:
+    """`supernet_steps` (one-shot only): train the supernet this long instead of the recipe's length."""
     init = describe(source_weights(base, candidate["overrides"], recipe))
     spec = {"base": base, "label": candidate["label"], "overrides": candidate["overrides"], "recipe": recipe,
             "data": data, "seed": seed, "strategy": strategy, "init": init}
+    if supernet_steps is not None:
+        spec["supernet_steps"] = supernet_steps
     return {**spec, "key": trial_key(spec)}
 
 

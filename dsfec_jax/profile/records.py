@@ -12,7 +12,8 @@ from ..core.environment import environment
 def size_record(detector, xla: bool = True) -> dict:
     """Everything but latency: params, analytic and XLA GFLOPs, memory (no timing loop).
     xla=False skips the compile behind the XLA columns (a search's light profile)."""
-    variables = detector.init(jax.random.key(0))
+    # sizes read shapes only: tracing init (no compile) is enough, and XLA's columns lower on shapes
+    variables = jax.eval_shape(detector.init, jax.random.key(0))
     inputs = detector.dummy_inputs(1)
     params = counting.count_params(variables)
     flops = counting.count_gflops(detector)
@@ -47,7 +48,7 @@ def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int
     if timing:
         suites = {}
         for d in detectors:
-            variables = d.init(jax.random.key(0))
+            variables = latency.timing_variables(d)
             suites[d.name] = latency.stage_functions(d, variables, d.dummy_inputs(1), per_stage=not light)
         times = latency.time_interleaved(suites, repeats, warmup)
         for rec, d in zip(records, detectors):

@@ -65,10 +65,14 @@ PEAK_CONVENTION = (f"the faster of two {SGEMM_N} x {SGEMM_N} float32 matmuls (2 
                    "numpy's BLAS, each timed in the same interleaved loop, process and thread count")
 
 
+BUDGET_FRAMES = 400  # train frames the pillar budget is sized on: the quick search recipe's count
+
+
 @dataclasses.dataclass(frozen=True)
 class Settings:
     """What is measured: `batch` frames per step on `window`-cell training windows (None: the
-    whole grid) with `max_pillars` slots; `repeats` timed repetitions after `warmup`; the timed
+    whole grid) with at most `max_pillars` slots (sized to the data as training does unless
+    `size_pillars` is False); `repeats` timed repetitions after `warmup`; the timed
     calls cycle through `distinct_batches` pre-built batches; `profile_steps` steps are traced
     for the breakdown (none when `breakdown` is False)."""
 
@@ -81,9 +85,11 @@ class Settings:
     distinct_batches: int = 4
     breakdown: bool = True
     profile_steps: int = 3
+    size_pillars: bool = True  # slots sized to the data as train.fit does; False: max_pillars slots
+    budget_frames: int = BUDGET_FRAMES  # train frames the slots are sized on
 
     def __post_init__(self):
-        for field, low in (("batch", 1), ("max_pillars", 1), ("repeats", 1), ("warmup", 0),
+        for field, low in (("batch", 1), ("max_pillars", 1), ("repeats", 1), ("warmup", 0), ("budget_frames", 1),
                            ("distinct_batches", 1), ("profile_steps", 1)):
             value = getattr(self, field)
             if not isinstance(value, int) or value < low:
@@ -99,14 +105,19 @@ def training_batches(name: str, overrides: dict, settings: Settings) -> tuple[zo
     number of training windows), made as train/fit.py makes them."""
     from ..data.batches import BatchStream, training_windows
     from ..data.points.augment import AugmentConfig
-    from ..data.points.pillarize import PillarSpec
+    from ..data.points.pillarize import PillarSpec, pillar_budget
     from ..data.points.sources import load_frames
 
     cfg = zoo.config(name, **overrides)
     family = zoo.family_of(cfg)
-    windows = [zoo.create(name, **{**overrides, "grid": g}) for g in training_windows(cfg.grid, settings.window)]
-    frames = load_frames(family.benchmark, "train", settings.batch * settings.distinct_batches, settings.seed,
+    used = settings.batch * settings.distinct_batches
+    frames = load_frames(family.benchmark, "train", max(used, settings.budget_frames), settings.seed,
                          features=family.input_columns)
+    # the slots a training run on this benchmark would size (train.fit), not the few frames timed
+    slots = pillar_budget(frames, cfg.max_pillars) if settings.size_pillars else cfg.max_pillars
+    frames = [frames[i] for i in range(used)]
+    windows = [zoo.create(name, **{**overrides, "grid": g, "max_pillars": slots})
+               for g in training_windows(cfg.grid, settings.window)]
     stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.targets(cfg), settings.batch,
                          settings.seed, AugmentConfig(), origin_input=family.origin_input)
     # cycled windows: step s trains window s % n; one network serves all windows only with origin inputs
@@ -245,6 +256,7 @@ def figures(w: Workload, samples: dict, peak_gflop_per_s: float, batch: int) -> 
     return {
         "label": w.label, "overrides": _jsonable(w.overrides),
         "input": {k: list(v.shape) for k, v in w.batches[0]["inputs"].items()},
+        "pillar_slots": int(w.detector.config.max_pillars),
         "times_ms": {p: summary(samples[p]) for p in PROGRAMS},
         "compile_s": {p: round(s, 2) for p, s in w.compile_s.items()},
         "frames_per_s": round(batch / (median["step"] / 1e3), 3),
@@ -410,21 +422,28 @@ def _f(value, digits: int = 1) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
 
+def _slots_text(settings: dict) -> str:
+    if settings.get("size_pillars", False):
+        return (f"pillar slots sized to the data as training sizes them (data.points.pillarize.pillar_budget on "
+                f"{settings.get('budget_frames', BUDGET_FRAMES)} train frames, at most {settings['max_pillars']})")
+    return f"{settings['max_pillars']} pillar slots"
+
+
 def markdown(content: dict, breakdown_rows: int = 6, full: bool = True) -> str:
     """The figures table, the comparison table (with --compare) and each step's breakdown
     (full=False: its module table only)."""
     records = content["records"]
-    lines = ["| model | config | threads | train frames/s | step ms | eval fwd ms | train fwd ms | fwd+bwd ms "
+    lines = ["| model | config | threads | pillar slots | train frames/s | step ms | eval fwd ms | train fwd ms | fwd+bwd ms "
              "| fwd+bwd / eval | step GFLOP/s (3 x fwd) | % sgemm | step GFLOP/s (XLA) | % sgemm | sgemm GFLOP/s (XLA / numpy) "
              "| compile s (step) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in records:
         by_ref = r["sgemm"]["by_reference_gflop_per_s"]
         for c in r["configs"]:
             t = {p: c["times_ms"][p]["median"] for p in PROGRAMS}
             config = "default" if c["label"] == "default" else _overrides_text(content["compare"])
             lines.append(
-                f"| {r['model']} | {config} | {r['threads']} | {c['frames_per_s']:.2f} | {t['step']:.1f} "
+                f"| {r['model']} | {config} | {r['threads']} | {c.get('pillar_slots', '-')} | {c['frames_per_s']:.2f} | {t['step']:.1f} "
                 f"| {t['eval_forward']:.1f} | {t['train_forward']:.1f} | {t['fwd_bwd']:.1f} | {c['fwd_bwd_over_eval']:.2f} "
                 f"| {_f(c['gflop_per_s']['analytic']['step'])} | {_f(c['percent_of_peak']['analytic']['step'])} "
                 f"| {_f(c['gflop_per_s']['xla']['step'])} | {_f(c['percent_of_peak']['xla']['step'])} "
@@ -443,7 +462,7 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True) -> str:
     lines += ["", f"Measured with `{content['command']}` on {env.get('cpu', '?')}, "
                   f"jax {env.get('versions', {}).get('jax', '?')}: batch {s['batch']}, "
                   f"{'whole-grid' if s['window'] is None else str(s['window']) + '-cell'} training windows, "
-                  f"{s['max_pillars']} pillar slots, median of {s['repeats']} interleaved repetitions after "
+                  f"{_slots_text(s)}, median of {s['repeats']} interleaved repetitions after "
                   f"{s['warmup']} warm-up. Analytic GFLOP/s count {content['flops_convention']}. Peak: "
                   f"{content['peak_convention']}. Record: `dsfec_jax/profile/records/train_bench.json`."]
     for r in records:

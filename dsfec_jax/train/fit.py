@@ -11,7 +11,7 @@ from .. import zoo
 from ..data.points.augment import AugmentConfig
 from ..data.batches import BatchStream, training_windows
 from ..data.points.frame import Frame
-from ..data.points.pillarize import PillarSpec
+from ..data.points.pillarize import PillarSpec, pillar_budget
 from ..evaluate import validate as run_validation
 from ..predict import Predictor
 from ..core.provenance import jsonable, versions
@@ -45,7 +45,10 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     det = zoo.create(model, **overrides)
     cfg = det.config
     family = zoo.family_of(cfg)
-    windows = [zoo.create(model, **{**overrides, "grid": g}) for g in training_windows(cfg.grid, window)]
+    # training pillar slots sized to the data (no pillar lost, far less padding: pillar_budget)
+    slots = pillar_budget(frames, cfg.max_pillars)
+    windows = [zoo.create(model, **{**overrides, "grid": g, "max_pillars": slots})
+               for g in training_windows(cfg.grid, window)]
     # A family whose network takes each window's origin as an input (RadarNeXt) trains every
     # window with one compiled step (its 0.16 m grid needs 16 windows of 96 cells); the others
     # (DSFEC) compile one step per window.
@@ -58,7 +61,7 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     info = {**(run_info or {}), "model": model, "overrides": jsonable(overrides),
             "config": jsonable(dataclasses.asdict(cfg)), "schedule": dataclasses.asdict(schedule), "seed": seed,
             "steps": total, "train_frames": len(frames), "val_frames": len(val),
-            "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows],
+            "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows], "train_pillars": slots,
             "window_sampling": window_sampling, "versions": versions()}
 
     last_tables = {}  # the match tables of the latest validation, which the returned headline is

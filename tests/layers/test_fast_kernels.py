@@ -10,7 +10,7 @@ from jax import lax
 from dsfec_jax.layers import Conv, ConvTranspose, DepthwiseConv
 from dsfec_jax.layers.conv import DIMS, fast_shifted_depthwise, shifted_depthwise, subpixel_conv_transpose
 from dsfec_jax.models.dsfec.loss import LossConfig, detection_loss
-from conftest import tiny
+from conftest import as_float64, tiny
 from train.test_train_step import toy_batch
 
 RTOL = 1e-4  # the issue's bar: relative error of gradients, float32
@@ -102,24 +102,13 @@ def test_an_unknown_kernels_value_names_the_field():
         tiny("dsfec_s", kernels="quick")
 
 
-@pytest.fixture
-def float64():
-    """Whole networks in float64: a 32 x 32 toy batch leaves batch norm nearly degenerate (few
-    occupied cells), which turns float32 rounding into ~1e-3 differences between any two
-    summation orders (the baseline's, measured); in float64 the two formulations agree to ~1e-13."""
-    jax.config.update("jax_enable_x64", True)
-    yield
-    jax.config.update("jax_enable_x64", False)
-
-
 @pytest.mark.parametrize("name", ["dsfec_s"])  # the Baseline's residual path: the per-layer tests (43 s saved)
 def test_whole_model_training_gradients_equal(name, float64):
     """The train-mode loss of a whole small network (FEC or PointPillars encoder, DSConv or
     residual backbone, deconv neck, heads) has the same gradients with either formulation."""
-    as64 = lambda tree: jax.tree.map(lambda a: a.astype(jnp.float64) if a.dtype == jnp.float32 else a, tree)  # noqa: E731
-    batch = as64(toy_batch(tiny(name)))
+    batch = as_float64(toy_batch(tiny(name)))
     plain, fast = tiny(name, kernels="plain"), tiny(name, kernels="fast")
-    variables = as64(plain.init(jax.random.key(0)))
+    variables = as_float64(plain.init(jax.random.key(0)))
     loss_cfg = LossConfig()
 
     def loss_and_grads(det):
@@ -145,8 +134,7 @@ def test_radarnext_training_gradients_equal(name, float64):
 
     tiny_grid = dict(grid=Grid((0.0, 5.12), (-2.56, 2.56), (-3.0, 2.0), 0.16), max_pillars=128)  # 32 x 32
     plain, fast = zoo.create(name, kernels="plain", **tiny_grid), zoo.create(name, kernels="fast", **tiny_grid)
-    as64 = lambda tree: jax.tree.map(lambda a: a.astype(jnp.float64) if a.dtype == jnp.float32 else a, tree)  # noqa: E731
-    variables, inputs = as64(plain.init(jax.random.key(0))), as64(plain.config.dummy_inputs(2, occupancy=0.3))
+    variables, inputs = as_float64(plain.init(jax.random.key(0))), as_float64(plain.config.dummy_inputs(2, occupancy=0.3))
 
     def output_grads(det):
         def loss(params):

@@ -88,6 +88,23 @@ def test_latency_records_per_stage():
     assert rec["latency_setup"]["threads"] >= 1 and rec["latency_setup"]["versions"]["jax"]
 
 
+@pytest.mark.parametrize("name", ["dsfec_s", "radarnext_mdfen"])
+def test_timing_variables_have_inits_shapes_and_finite_outputs(name):
+    """The timing loop's stand-in weights (no init compile) fit the network and keep it finite."""
+    import numpy as np
+    from dsfec_jax.profile.latency import timing_variables
+
+    det = tiny(name)
+    stand_in, shapes = timing_variables(det), jax.eval_shape(det.init, jax.random.key(0))
+    assert jax.tree.structure(stand_in) == jax.tree.structure(shapes)
+    assert jax.tree.map(lambda a: (a.shape, a.dtype), stand_in) == jax.tree.map(lambda a: (a.shape, a.dtype), shapes)
+    stats = jax.tree_util.tree_flatten_with_path(stand_in.get("batch_stats", {}))[0]
+    assert stats and all(np.all(v == (1 if path[-1].key == "var" else 0)) for path, v in stats)
+    out = det.apply(stand_in, det.dummy_inputs(1, occupancy=0.3))
+    assert all(np.isfinite(np.asarray(a)).all() for a in jax.tree.leaves(out))
+    assert any(np.abs(np.asarray(a)).max() > 0 for a in jax.tree.leaves(out))
+
+
 def test_cli_json_and_readme(tmp_path, capsys):
     readme = tmp_path / "README.md"
     readme.write_text("intro\n<!-- zoo-table:start -->\nold\n<!-- zoo-table:end -->\nrest\n")

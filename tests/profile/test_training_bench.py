@@ -19,7 +19,7 @@ TINY = {"grid": Grid((0.0, 4.0), (-2.0, 2.0), (-2.5, 2.5), 0.5), "max_points": 4
         "stage_widths": (8, 8, 8, 8), "neck_widths": (8,), "head_convs": 1, "head_width": 8,
         "fec_filters": (8, 16, 8), "stem_filters": 8}
 SETTINGS = training.Settings(batch=2, window=None, max_pillars=32, repeats=1, warmup=0, distinct_batches=1,
-                             profile_steps=1)
+                             profile_steps=1, budget_frames=8)
 # `notes` changes no layer: the second config compiles to the same programs (compile-cache hits),
 # which keeps this test short; a real comparison switches a formulation (tested for refusal below)
 COMPARE = {"notes": "same network"}
@@ -51,6 +51,9 @@ def test_the_record_holds_every_figure(record):
             assert all(positive(v) for v in config["gflop_per_s"][kind].values())
             assert all(positive(v) for v in config["percent_of_peak"][kind].values())
         assert config["input"]["points"][0] == SETTINGS.batch
+        # slots sized to the data as training sizes them (data.points.pillarize.pillar_budget; the
+        # test pillar_budget tests the sizing), at most max_pillars: radar frames have hundreds of points
+        assert config["pillar_slots"] == config["input"]["points"][1] == SETTINGS.max_pillars
     env = record["environment"]
     assert env["cpu"] and env["versions"]["jax"] and env["xla_threads"] >= 1
 

@@ -263,6 +263,22 @@ def test_oneshot_resume_reuses_the_saved_supernet(tiny_search, tmp_path):
     assert records[1]["metrics"] == first[1]["metrics"]  # same supernet, same ranking
 
 
+def test_supernet_steps_flag_trains_longer_as_other_trials(tiny_search, tmp_path):
+    out = tmp_path / "oneshot"
+    argv = ["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "oneshot", "--out", str(out)]
+    assert blocks.main(argv) == 0 and blocks.main(argv + ["--supernet-steps", "4"]) == 0
+    records = Journal(out).records()
+    # the longer supernet is new trials (other keys, another saved supernet), not a resume of the first
+    assert [r["supernet"]["steps"] for r in records] == [2, 2, 4, 4]
+    assert len({r["key"] for r in records}) == 4 and len(list(out.glob("supernet_*.msgpack"))) == 2
+    assert set(records[0]["phases_s"]) == {"recalibrate", "validate", "profile"}
+    with pytest.raises(SystemExit, match="supernet-steps"):
+        blocks.main(argv + ["--supernet-steps", "0"])
+    with pytest.raises(SystemExit, match="supernet-steps is for --strategy oneshot"):
+        blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "train",
+                     "--supernet-steps", "4", "--out", str(tmp_path / "train")])
+
+
 def test_oneshot_refuses_non_depth_axes():
     from search.oneshot import supernet_overrides
 

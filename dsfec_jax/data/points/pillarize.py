@@ -89,6 +89,26 @@ def pillarize(points: np.ndarray, spec: PillarSpec) -> tuple[dict, dict]:
     return {"points": out_points, "mask": mask, "coords": coords}, stats
 
 
+PILLAR_BUDGET_STEP = 128  # budgets are multiples of this: a few compiled shapes, not one per data set
+
+
+def pillar_budget(frames, max_pillars: int, step: int = PILLAR_BUDGET_STEP) -> int:
+    """The fewest pillar slots (a multiple of `step`, at most `max_pillars`) that hold every occupied
+    cell of any window of any of `frames`, before or after augmentation.
+
+    A cell is occupied by at least one point, and augmentation (data.points.augment) moves and drops
+    points but never adds one, so no window of a frame has more occupied cells than the frame has
+    points. Training with this budget instead of `max_pillars` therefore drops no pillar that
+    `max_pillars` would have kept and gives the same network inputs minus all-padding slots, which
+    the pillar net masks out (masked max, masked batch norm, the scatter's spill cell). Radar frames
+    have a few hundred points, so a 2048-slot budget spent most of the pillar net's time on padding.
+    """
+    if max_pillars < 1 or step < 1:
+        raise ValueError(f"pillar_budget: max_pillars={max_pillars}, step={step}; expected integers >= 1")
+    most = max((len(f.points) for f in frames), default=0)
+    return min(max_pillars, max(step, -(-most // step) * step))
+
+
 def pillarize_frames(frames: list[Frame], spec: PillarSpec) -> tuple[dict, list[dict]]:
     """A batch: each frame pillarized, stacked on a leading axis."""
     outs, stats = zip(*(pillarize(select_columns(fr, spec.features), spec) for fr in frames))
