@@ -161,7 +161,7 @@ def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path
 
     out = tmp_path / "oneshot"
     assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "oneshot",
-                        "--seeds", "2", "--out", str(out)]) == 0
+                        "--seeds", "2", "--supernet-steps", "4", "--out", str(out)]) == 0
     records = Journal(out).records()
     assert [r["status"] for r in records] == ["ok"] * 4, [r.get("error") for r in records]
     assert [r["seed"] for r in records] == [0, 0, 1, 1] and len(list(out.glob("supernet_*.msgpack"))) == 2
@@ -172,9 +172,10 @@ def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path
     assert {tuple(r["supernet"]["stage_blocks"]) for r in records} == {(1, 2, 1, 1)}
     assert records[0]["costs"]["gflops"] < records[1]["costs"]["gflops"]
     assert all(r["strategy"] == "oneshot" for r in records)
-    assert all(r["supernet"]["steps"] == 2 for r in records)  # one round: each subnet trained once
+    assert all(r["supernet"]["steps"] == 4 for r in records)  # --supernet-steps: two rounds, not the recipe's 2
+    assert all(set(r["phases_s"]) == {"recalibrate", "validate", "profile"} for r in records)
     assert all("car" in r["matches"] for r in records) and (out / "significance.json").exists()
-    assert "supernet (1, 2, 1, 1) trained 2 steps in" in (out / "report.md").read_text()
+    assert "supernet (1, 2, 1, 1) trained 4 steps in" in (out / "report.md").read_text()
     assert "(seeds 0, 1)" in (out / "report.md").read_text()  # one supernet per seed, in seed order
     # subnets are prefixes of the supernet: their parameter entries are a subset of its entries
     sub = oneshot.module_keys(zoo.create(tiny_search, stage_blocks=(1, 1, 1, 1)))
@@ -263,20 +264,18 @@ def test_oneshot_resume_reuses_the_saved_supernet(tiny_search, tmp_path):
     assert records[1]["metrics"] == first[1]["metrics"]  # same supernet, same ranking
 
 
-def test_supernet_steps_flag_trains_longer_as_other_trials(tiny_search, tmp_path):
-    out = tmp_path / "oneshot"
-    argv = ["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "oneshot", "--out", str(out)]
-    assert blocks.main(argv) == 0 and blocks.main(argv + ["--supernet-steps", "4"]) == 0
-    records = Journal(out).records()
-    # the longer supernet is new trials (other keys, another saved supernet), not a resume of the first
-    assert [r["supernet"]["steps"] for r in records] == [2, 2, 4, 4]
-    assert len({r["key"] for r in records}) == 4 and len(list(out.glob("supernet_*.msgpack"))) == 2
-    assert set(records[0]["phases_s"]) == {"recalibrate", "validate", "profile"}
-    with pytest.raises(SystemExit, match="supernet-steps"):
-        blocks.main(argv + ["--supernet-steps", "0"])
+def test_supernet_steps_make_other_trials_and_bad_values_are_refused(tiny_search, tmp_path):
+    """A supernet of another length is another trial (its own key, so its own saved supernet): a
+    RUN_DIR never resumes a supernet trained for a different number of steps."""
+    candidate = {"label": "stage2_blocks=1", "overrides": {"stage_blocks": (1, 1, 1, 1)}}
+    keys = {trial.make_trial(tiny_search, candidate, "quick", "synthetic", 0, "oneshot", steps)["key"]
+            for steps in (None, 4, 8)}
+    assert len(keys) == 3
+    argv = ["--stage", "2", "--values", "1,2", "--base", tiny_search, "--out", str(tmp_path / "x")]
+    with pytest.raises(SystemExit, match="supernet-steps 0"):
+        blocks.main(argv + ["--strategy", "oneshot", "--supernet-steps", "0"])
     with pytest.raises(SystemExit, match="supernet-steps is for --strategy oneshot"):
-        blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "train",
-                     "--supernet-steps", "4", "--out", str(tmp_path / "train")])
+        blocks.main(argv + ["--strategy", "train", "--supernet-steps", "4"])
 
 
 def test_oneshot_refuses_non_depth_axes():
