@@ -169,12 +169,12 @@ def run_oneshot(base: str, trials: list[dict], run_dir: str | Path, retry_failed
 def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[str], log) -> None:
     recipe, seed, data = get_recipe(trials[0]["recipe"], base), trials[0]["seed"], trials[0]["data"]
     family, net, fixed = zoo.family_of(base), hooks(base), recipe.model_overrides()
-    supernet = zoo.create(base, **supernet_overrides(trials, net.field), **fixed)
+    overrides = {**supernet_overrides(trials, net.field), **fixed}
+    supernet = zoo.create(base, **overrides)
     frames = load_frames(data, "train", recipe.train_frames, seed=0, features=family.input_columns)
     # trained and recalibrated with pillar slots sized to the training frames (pillar_budget: the
     # same inputs, less padding), validated with the recipe's slots
-    trainee = zoo.create(base, **supernet_overrides(trials, net.field), **{
-        **fixed, "max_pillars": pillar_budget(frames, supernet.config.max_pillars)})
+    trainee = zoo.create(base, **{**overrides, "max_pillars": pillar_budget(frames, supernet.config.max_pillars)})
     cfg = trainee.config
     stream = BatchStream(frames, PillarSpec.of(cfg), family.targets(cfg), recipe.schedule.batch_size, seed,
                          origin_input=family.origin_input)

@@ -103,21 +103,20 @@ class Settings:
 def training_batches(name: str, overrides: dict, settings: Settings) -> tuple[zoo.Detector, list[dict], int]:
     """(the network a step trains, `distinct_batches` device batches {'inputs', 'targets'}, the
     number of training windows), made as train/fit.py makes them."""
-    from ..data.batches import BatchStream, training_windows
+    from ..data.batches import BatchStream
     from ..data.points.augment import AugmentConfig
-    from ..data.points.pillarize import PillarSpec, pillar_budget
+    from ..data.points.pillarize import PillarSpec
     from ..data.points.sources import load_frames
+    from ..train.fit import window_detectors
 
     cfg = zoo.config(name, **overrides)
     family = zoo.family_of(cfg)
     used = settings.batch * settings.distinct_batches
     frames = load_frames(family.benchmark, "train", max(used, settings.budget_frames), settings.seed,
                          features=family.input_columns)
-    # the slots a training run on this benchmark would size (train.fit), not the few frames timed
-    slots = pillar_budget(frames, cfg.max_pillars) if settings.size_pillars else cfg.max_pillars
+    # slots sized as a training run on this benchmark sizes them (train.fit), not on the few frames timed
+    windows = window_detectors(name, overrides, settings.window, frames if settings.size_pillars else None)
     frames = [frames[i] for i in range(used)]
-    windows = [zoo.create(name, **{**overrides, "grid": g, "max_pillars": slots})
-               for g in training_windows(cfg.grid, settings.window)]
     stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.targets(cfg), settings.batch,
                          settings.seed, AugmentConfig(), origin_input=family.origin_input)
     # cycled windows: step s trains window s % n; one network serves all windows only with origin inputs

@@ -31,6 +31,16 @@ def _check_counts(counts: dict) -> None:
         raise ValueError(f"fit: {', '.join(bad)}; expected at least 1")
 
 
+def window_detectors(model: str, overrides: dict, window: int | None, sizing_frames=None) -> list:
+    """The detector of each training window (`window` cells; None: the whole grid) of `model` with
+    `overrides`. With `sizing_frames`, pillar slots are sized to them (no pillar lost, far less
+    padding: pillar_budget); without, the config's max_pillars."""
+    cfg = zoo.config(model, **overrides)
+    slots = cfg.max_pillars if sizing_frames is None else pillar_budget(sizing_frames, cfg.max_pillars)
+    return [zoo.create(model, **{**overrides, "grid": g, "max_pillars": slots})
+            for g in training_windows(cfg.grid, window)]
+
+
 def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Frame], schedule: Schedule,
         run_dir: str | Path, seed: int = 0, steps: int | None = None, window: int | None = 96,
         augment: bool = True, eval_every: int | None = 200, run_info: dict | None = None,
@@ -45,10 +55,7 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     det = zoo.create(model, **overrides)
     cfg = det.config
     family = zoo.family_of(cfg)
-    # training pillar slots sized to the data (no pillar lost, far less padding: pillar_budget)
-    slots = pillar_budget(frames, cfg.max_pillars)
-    windows = [zoo.create(model, **{**overrides, "grid": g, "max_pillars": slots})
-               for g in training_windows(cfg.grid, window)]
+    windows = window_detectors(model, overrides, window, frames)
     # A family whose network takes each window's origin as an input (RadarNeXt) trains every
     # window with one compiled step (its 0.16 m grid needs 16 windows of 96 cells); the others
     # (DSFEC) compile one step per window.
@@ -61,7 +68,7 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     info = {**(run_info or {}), "model": model, "overrides": jsonable(overrides),
             "config": jsonable(dataclasses.asdict(cfg)), "schedule": dataclasses.asdict(schedule), "seed": seed,
             "steps": total, "train_frames": len(frames), "val_frames": len(val),
-            "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows], "train_pillars": slots,
+            "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows], "train_pillars": windows[0].config.max_pillars,
             "window_sampling": window_sampling, "versions": versions()}
 
     last_tables = {}  # the match tables of the latest validation, which the returned headline is
