@@ -167,9 +167,22 @@ def _report_vod(frames, detections, predictor) -> tuple[dict, str]:
         f"{c} {ap:.2f}" for c, ap in result["AP"].items())
 
 
+def _validate_rd_coco(predictor, samples, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
+    from .evaluate_rd import evaluate_rd
+    return evaluate_rd(predictor, samples)[0], {}
+
+
+def _report_rd_coco(samples, detections, predictor) -> tuple[dict, str]:
+    from .evaluate_rd import ground_truth, score_rd, summary
+    result = {"protocol": "rd_coco", **score_rd(ground_truth(samples), detections, predictor.classes)}
+    return result, summary(result)
+
+
 # name -> (validate(predictor, frames, match_classes) -> (logged scores, match tables),
-#          report(frames, detections, predictor) -> (the eval command's fields, its one-line summary))
-PROTOCOLS = {"nuscenes": (_validate_nuscenes, _report_nuscenes), "vod": (_validate_vod, _report_vod)}
+#          report(frames, detections, predictor) -> (the eval command's fields, its one-line summary));
+# the range-Doppler protocol's "frames" are RD samples and its predictor an RD one (predict_rd)
+PROTOCOLS = {"nuscenes": (_validate_nuscenes, _report_nuscenes), "vod": (_validate_vod, _report_vod),
+             "rd_coco": (_validate_rd_coco, _report_rd_coco)}
 
 
 def _protocol(name: str):
@@ -192,9 +205,12 @@ def report(protocol: str, frames: Sequence[Frame], detections: dict, predictor) 
 def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
     """What a weights manifest records: the family's protocol on `frames` frames of `split` of its
     embedded synthetic benchmark (data seed 0), the keys its protocol keeps."""
-    from .data.points.sources import load_frames
-
-    data = load_frames(family.benchmark, split, frames, 0, features=family.input_columns)
+    if family.modality == "rd":
+        from .data.rd.sources import load_rd_samples
+        data = load_rd_samples(family.benchmark, split, frames, 0)
+    else:
+        from .data.points.sources import load_frames
+        data = load_frames(family.benchmark, split, frames, 0, features=family.input_columns)
     scores, _ = validate(family.metric.name, predictor, data)
     return {k: scores[k] for k in family.metric.keep} | {
         "frames": frames, "data_seed": 0, "data": family.benchmark, "protocol": family.metric.name}

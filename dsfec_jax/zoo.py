@@ -20,19 +20,24 @@ from typing import Any
 import jax
 
 from .models.dsfec.family import FAMILY as DSFEC
-from .models.family import Family
+from .models.family import MODALITIES, Family
 from .models.radarnext.family import FAMILY as RADARNEXT
+from .models.yolo_rd.family import FAMILY as YOLO_RD
 
 # The registry of families: a new family is its folder under models/ plus one entry here.
-FAMILIES: dict[str, Family] = {f.name: f for f in (DSFEC, RADARNEXT)}
+FAMILIES: dict[str, Family] = {f.name: f for f in (DSFEC, RADARNEXT, YOLO_RD)}
 REGISTRY: dict[str, Any] = {name: cfg for f in FAMILIES.values() for name, cfg in f.variants.items()}
 
 
-def available(family: str | None = None) -> list[str]:
-    """Names of the registered variants, optionally of one family (a key of FAMILIES)."""
+def available(family: str | None = None, modality: str | None = None) -> list[str]:
+    """Names of the registered variants, optionally of one family (a key of FAMILIES) or of one
+    modality ('points': the point-cloud families; 'rd': range-Doppler maps)."""
     if family is not None and family not in FAMILIES:
         raise KeyError(f"unknown family {family!r}; families: {sorted(FAMILIES)}")
-    return sorted(REGISTRY if family is None else FAMILIES[family].variants)
+    if modality is not None and modality not in MODALITIES:
+        raise KeyError(f"unknown modality {modality!r}; modalities: {MODALITIES}")
+    names = REGISTRY if family is None else FAMILIES[family].variants
+    return sorted(n for n in names if modality is None or family_of(n).modality == modality)
 
 
 def family_of(cfg_or_name) -> Family:
@@ -42,6 +47,17 @@ def family_of(cfg_or_name) -> Family:
         if type(cfg) is family.config_class:
             return family
     raise TypeError(f"{type(cfg).__name__} belongs to no registered family; families: {sorted(FAMILIES)}")
+
+
+def require_modality(cfg_or_name, modality: str, what: str) -> Family:
+    """The family of a config or name, when it reads `modality`; else a ValueError saying which
+    `what` (a command or function) handles only that modality."""
+    family = family_of(cfg_or_name)
+    if family.modality != modality:
+        name = cfg_or_name if isinstance(cfg_or_name, str) else cfg_or_name.name
+        raise ValueError(f"{what} handles {modality!r} models; {name!r} is a {family.modality!r} model "
+                         f"(family {family.name!r})")
+    return family
 
 
 def config(name: str, /, **overrides):
@@ -136,7 +152,8 @@ def load_variables(detector: Detector, path: str | Path) -> dict:
 
 
 def load(name: str, /, weights: str | Path | None = None, predictor_options: dict | None = None, **overrides):
-    """A ready predictor: `zoo.load("dsfec_s")(points) -> Detections` (shipped weights by default)."""
+    """A ready predictor: `zoo.load("dsfec_s")(points) -> Detections`, `zoo.load("yolov8n")(rd_sample)
+    -> Boxes2D` (shipped weights by default)."""
     from .predict import predictor_for
 
     detector = create(name, **overrides)
@@ -145,5 +162,9 @@ def load(name: str, /, weights: str | Path | None = None, predictor_options: dic
         raise FileNotFoundError(f"no weights at {path}" + ("" if weights else f": {name!r} ships no weights yet; "
                                 f"train with `dsfec train --model {name}` and pass --weights"))
     variables = load_variables(detector, path)
+    if family_of(detector.config).modality == "rd":
+        from .predict_rd import RDPredictor
+        return RDPredictor(detector, {"params": variables["params"], "batch_stats": variables["batch_stats"]},
+                           **(predictor_options or {}))
     return predictor_for(detector, {"params": variables["params"], "batch_stats": variables["batch_stats"]},
                          **(predictor_options or {}))

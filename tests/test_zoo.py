@@ -19,7 +19,9 @@ def test_available_lists_the_paper_variants():
     assert zoo.available("dsfec") == ["baseline", "dsfec_l", "dsfec_m", "dsfec_s"]
     radarnext = [f"radarnext_{n}{d}" for n in ("fpn", "mdfen", "pan") for d in ("", "_dense", "_tj4d")]
     assert zoo.available("radarnext") == radarnext
-    assert zoo.available() == sorted(zoo.available("dsfec") + radarnext)
+    assert zoo.available(modality="points") == sorted(zoo.available("dsfec") + radarnext)
+    assert zoo.available() == sorted(zoo.available("dsfec") + radarnext + zoo.available("yolo_rd"))
+    assert zoo.available(modality="rd") == zoo.available("yolo_rd")
 
 
 @pytest.mark.parametrize("name", sorted(PINNED_PARAMS))

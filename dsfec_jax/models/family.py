@@ -67,21 +67,31 @@ class SearchRecipe:
     warm_start: bool = False
 
 
+MODALITIES = ("points", "rd")  # point clouds (pillarized), range-Doppler maps (image-like)
+# the Family fields that only point-cloud families have (pillars, BEV boxes, rotated NMS)
+POINT_FIELDS = ("input_columns", "targets", "decoder", "predictor", "map_outputs", "head_maps")
+
+
 @dataclasses.dataclass(frozen=True)
 class Family:
     """Everything that differs between detector families.
 
-    Config and variants: `config_class`, `variants` (name -> frozen config).
-    Data: `input_columns` ("dsfec": every source mapped onto nuScenes' columns; "native": a
-    source's own), `benchmark` (the embedded synthetic source its commands default to),
-    `targets(cfg)` -> fn(boxes, grid) -> one frame's target maps, `origin_input` (the network
-    takes each training window's origin as an input, so one compiled step serves every window).
-    Training: `loss(cfg)` -> fn(outputs, targets) -> (loss, parts).
-    Inference: `head_classes(cfg)` -> {head: classes}; `decoder(cfg, top_k)` -> fn(head outputs)
-    -> (boxes, scores, labels) before NMS (boxes: 5 BEV or 7 3D columns); `predictor` (defaults
-    of the host pipeline: top_k, nms_iou, max_boxes). Deploy: `deploy_config` / `deploy_variables`
-    (the inference form; identity when there is none), `map_outputs(cfg)` (names of the head maps
-    an export adds) and `head_maps(cfg, outputs)` (those maps, in that order).
+    Config and variants: `config_class`, `variants` (name -> frozen config). `modality`: what
+    the family's networks read, 'points' (point clouds, pillarized; DSFEC, RadarNeXt) or 'rd'
+    (range-Doppler maps as images; the YOLO-RD family). Shared code that only handles one
+    modality asks for it (`zoo.require_modality`) and fails with a clear message otherwise.
+    Data: `benchmark` (the embedded synthetic source its commands default to).
+    Training: `loss(cfg)` -> fn(outputs, targets) -> (loss, parts); `schedules` maps the
+    commands' profiles (`--schedule quick|paper`) to train.schedules presets.
+    Inference: `head_classes(cfg)` -> {head: classes}.
+    Point families only (POINT_FIELDS; None for others): `input_columns` ("dsfec": every source
+    mapped onto nuScenes' columns; "native": a source's own), `targets(cfg)` -> fn(boxes, grid)
+    -> one frame's target maps, `origin_input` (the network takes each training window's origin
+    as an input, so one compiled step serves every window), `decoder(cfg, top_k)` -> fn(head
+    outputs) -> (boxes, scores, labels) before NMS (boxes: 5 BEV or 7 3D columns); `predictor`
+    (defaults of the host pipeline: top_k, nms_iou, max_boxes); `map_outputs(cfg)` (names of the
+    head maps an export adds) and `head_maps(cfg, outputs)` (those maps, in that order).
+    Deploy: `deploy_config` / `deploy_variables` (the inference form; identity when there is none).
     Measurement: `metric` (MetricProtocol), `stem_memory(cfg, variables)` (a paper's memory
     convention, or None). Search: `recipes` (name -> SearchRecipe), `axes` (derived search axes:
     name -> fn(base_cfg, overrides, value) -> overrides), `supernet` (or None)."""
@@ -89,18 +99,20 @@ class Family:
     name: str
     config_class: type
     variants: Mapping[str, Any]
-    input_columns: str
     benchmark: str
-    targets: Callable[[Any], Callable]
-    origin_input: bool
     loss: Callable[[Any], Callable]
     head_classes: Callable[[Any], dict]
-    decoder: Callable[[Any, int], Callable]
-    predictor: Mapping[str, Any]
-    map_outputs: Callable[[Any], tuple[str, ...]]
-    head_maps: Callable[[Any, Any], tuple]
     metric: MetricProtocol
-    recipes: Mapping[str, SearchRecipe]
+    modality: str = "points"
+    schedules: Mapping[str, str] = dataclasses.field(default_factory=lambda: {"quick": "quick", "paper": "paper"})
+    input_columns: str | None = None
+    targets: Callable[[Any], Callable] | None = None
+    origin_input: bool = False
+    decoder: Callable[[Any, int], Callable] | None = None
+    predictor: Mapping[str, Any] | None = None
+    map_outputs: Callable[[Any], tuple[str, ...]] | None = None
+    head_maps: Callable[[Any, Any], tuple] | None = None
+    recipes: Mapping[str, SearchRecipe] = dataclasses.field(default_factory=dict)
     axes: Mapping[str, Callable] = dataclasses.field(default_factory=dict)
     supernet: Supernet | None = None
     deploy_config: Callable[[Any], Any] = lambda cfg: cfg
@@ -111,3 +123,8 @@ class Family:
         wrong = [n for n, cfg in self.variants.items() if not isinstance(cfg, self.config_class)]
         if wrong:
             raise TypeError(f"family {self.name!r}: variants {wrong} are not {self.config_class.__name__}")
+        if self.modality not in MODALITIES:
+            raise ValueError(f"family {self.name!r}: modality {self.modality!r}; expected one of {MODALITIES}")
+        missing = [f for f in POINT_FIELDS if getattr(self, f) is None]
+        if self.modality == "points" and missing:
+            raise ValueError(f"family {self.name!r}: a point-cloud family needs {missing}")

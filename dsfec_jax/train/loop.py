@@ -81,6 +81,14 @@ def _differences(old, new, prefix: str = "") -> list[tuple[str, object, object]]
     return [d for k in keys for d in _differences(old.get(k, absent), new.get(k, absent), f"{prefix}{k}.")]
 
 
+def _added_default(path: str, old, new) -> bool:
+    """A schedule field added to Schedule after the run started, at its default value: the run
+    trained with that value all along (e.g. optimizer 'adamw'), so its resume is not a new setup."""
+    field = path[len("schedule."):-1] if path.startswith("schedule.") else None
+    defaults = {f.name: f.default for f in dataclasses.fields(Schedule)}
+    return old == "<absent>" and field in defaults and json.loads(json.dumps(defaults[field])) == new
+
+
 def _setup(info: dict) -> dict:
     return {k: v for k, v in info.items() if k not in LAUNCH_FIELDS}
 
@@ -102,7 +110,7 @@ def _started_with(run_dir: Path, run_info: dict) -> dict | None:
         old = json.loads(path.read_text())
     except json.JSONDecodeError as err:
         raise RunMismatch(f"{path}: not readable JSON ({err}); cannot tell which run this directory holds") from err
-    diffs = _differences(_setup(old), _setup(json.loads(json.dumps(run_info))))
+    diffs = [d for d in _differences(_setup(old), _setup(json.loads(json.dumps(run_info)))) if not _added_default(*d)]
     if diffs:
         raise RunMismatch(f"{path}: this run was started with {_show(diffs, 0)}; the command asks "
                           f"{_show(diffs, 1)}. Use a new run directory (--run-dir) for a different setup, "
@@ -209,7 +217,8 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                 scores = evaluate(state)
                 log.write(json.dumps({"step": done, "eval": scores}) + "\n")
                 log.flush()
-                if scores.get(best_key, -np.inf) > best:
+                score = scores.get(best_key)  # None: nothing to score (e.g. no ground truth)
+                if score is not None and score > best:
                     best = scores[best_key]
                     checkpoint.save(spec.run_dir / "checkpoints" / "best.msgpack", jax.device_get(state),
                                     {"step": done, best_key: best, "eval": scores})

@@ -5,6 +5,19 @@
 does not give the decay boundaries; we decay x0.1 at 2/3 and 8/9 of training (the usual
 "epochs 20 and 27 of 30" choice). `quick` is a short CPU schedule for a useful model in minutes. `radarnext` is RadarNeXt's
 published schedule (the warm-up length is ours).
+
+`yolo_paper` and `yolo_quick` (optimizer "sgd") are the ultralytics recipe for the YOLO-on-RD family,
+built by train/sgd_recipe.py: SGD lr0 0.01, Nesterov momentum 0.937, weight decay 5e-4, three
+warm-up epochs (at least `warmup_steps` = 100 batches), linear per-epoch decay to lrf 0.01, gradients
+summed to a nominal batch of 64 and clipped to norm 10. `yolo_paper` is the YOLOv8-Adapter paper's
+profile (300 epochs, batch 64); `yolo_quick` is ultralytics' default batch 16 (4 batches per optimizer
+step) for 15 epochs over ~1000 synthetic 256x64 samples: 15 x 62 batches x 16 = 14,880 frames, 12.4
+minutes at 20 frames/s (9.9 at 25, 16.5 at 15) on the 2-core CPU. Measured there (shared, load ~3),
+after compiling: YOLOv8n-Adapter ~22 frames/s (~11 min), YOLOv8n ~44 frames/s (~6 min).
+
+The recipe decays per epoch: its epochs come from `epochs`, and steps_per_epoch =
+max(total_steps // epochs, 1), so a `--steps` override stretches or shrinks every epoch rather than
+cutting the schedule off. A step-based sgd schedule (one with `steps`) must give `epochs` as well.
 """
 
 from __future__ import annotations
@@ -12,6 +25,10 @@ from __future__ import annotations
 import dataclasses
 
 import optax
+
+from .sgd_recipe import SGDRecipe, learning_rates, make_recipe, ultralytics_sgd
+
+OPTIMIZERS = ("adamw", "sgd")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -27,6 +44,21 @@ class Schedule:
     weight_decay: float = 0.01
     b1: float = 0.9
     clip_norm: float = 10.0
+    optimizer: str = "adamw"           # "sgd": the ultralytics recipe (sgd_recipe); warmup_steps is then
+                                       # the least number of warm-up batches (ultralytics: 100)
+    momentum: float = 0.937            # sgd only, from here on
+    warmup_momentum: float = 0.8
+    warmup_bias_lr: float = 0.1
+    warmup_epochs: float = 3.0
+    final_lr_fraction: float = 0.01    # ultralytics' lrf: the last epoch's lr is lr0 * lrf
+    nominal_batch: int = 64            # ultralytics' nbs: gradients are summed up to this batch
+
+    def __post_init__(self):
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"schedule {self.name!r}: optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
+        if self.optimizer == "sgd" and not self.epochs:
+            raise ValueError(f"schedule {self.name!r}: optimizer 'sgd' decays per epoch and needs epochs "
+                             f"(a positive integer, also when steps is given), got epochs={self.epochs!r}")
 
     def total_steps(self, train_frames: int) -> int:
         if self.steps is not None:
@@ -39,6 +71,9 @@ SCHEDULES = {
     "quick": Schedule("quick", 0.002, 50, 8, steps=600),
     # RadarNeXt's public config: AdamW lr 3e-3, wd 0.01, clip 10, x0.1 at epochs 35 and 45 of 80, batch 8
     "radarnext": Schedule("radarnext", 0.003, 100, 8, epochs=80, decay_at=(35 / 80, 45 / 80)),
+    # ultralytics/cfg/default.yaml hyperparameters with the SGD the issue names (default.yaml says "auto")
+    "yolo_paper": Schedule("yolo_paper", 0.01, 100, 64, epochs=300, optimizer="sgd", weight_decay=5e-4),
+    "yolo_quick": Schedule("yolo_quick", 0.01, 100, 16, epochs=15, optimizer="sgd", weight_decay=5e-4),
 }
 
 
@@ -48,8 +83,23 @@ def get_schedule(name: str, **overrides) -> Schedule:
     return dataclasses.replace(SCHEDULES[name], **overrides)
 
 
+def recipe_for(s: Schedule, total_steps: int) -> SGDRecipe:
+    """The ultralytics recipe of an sgd schedule over a run of `total_steps` batches."""
+    if s.optimizer != "sgd":
+        raise ValueError(f"schedule {s.name!r} uses optimizer {s.optimizer!r}, not 'sgd'")
+    return make_recipe(lr0=s.learning_rate, final_lr_fraction=s.final_lr_fraction, momentum=s.momentum,
+                       warmup_momentum=s.warmup_momentum, warmup_bias_lr=s.warmup_bias_lr,
+                       warmup_epochs=s.warmup_epochs, min_warmup_iters=s.warmup_steps, epochs=s.epochs,
+                       steps_per_epoch=max(total_steps // s.epochs, 1), batch_size=s.batch_size,
+                       nominal_batch=s.nominal_batch, weight_decay=s.weight_decay, clip_norm=s.clip_norm)
+
+
 def learning_rate(s: Schedule, total_steps: int) -> optax.Schedule:
-    """Linear warm-up, then piecewise-constant decay at the given fractions of training."""
+    """Linear warm-up, then piecewise-constant decay at the given fractions of training. For an sgd
+    schedule: the decayed weights' lr per batch (sgd_recipe.learning_rates has every group's)."""
+    if s.optimizer == "sgd":
+        recipe = recipe_for(s, total_steps)
+        return lambda step: learning_rates(recipe, step)["weight"]
     warmup = optax.linear_schedule(s.learning_rate / 100, s.learning_rate, max(s.warmup_steps, 1))
     boundaries = {max(int(f * total_steps) - s.warmup_steps, 1): s.decay_factor for f in s.decay_at}
     constant = optax.piecewise_constant_schedule(s.learning_rate, boundaries)
@@ -57,6 +107,9 @@ def learning_rate(s: Schedule, total_steps: int) -> optax.Schedule:
 
 
 def optimizer(s: Schedule, total_steps: int) -> optax.GradientTransformation:
+    """The schedule's optimizer, called once per batch (sgd accumulates batches inside)."""
+    if s.optimizer == "sgd":
+        return ultralytics_sgd(recipe_for(s, total_steps))
     return optax.chain(
         optax.clip_by_global_norm(s.clip_norm),
         optax.adamw(learning_rate(s, total_steps), b1=s.b1, weight_decay=s.weight_decay),

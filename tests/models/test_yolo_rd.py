@@ -29,7 +29,7 @@ COCO80 = tuple(f"class{i}" for i in range(80))
 @functools.lru_cache(maxsize=None)
 def shapes(cfg: YoloRDConfig, hw=TINY_HW, batch: int = 1):
     """(output shapes, variable shapes) without compiling anything."""
-    x = {k: jnp.asarray(v) for k, v in cfg.dummy_inputs(batch, 0, hw).items()}
+    x = {k: jnp.asarray(v) for k, v in cfg.dummy_inputs(batch, 0, hw=hw).items()}
     return jax.eval_shape(cfg.build().init_with_output, jax.random.key(0), x)
 
 
@@ -130,7 +130,7 @@ def test_adapter_at_init_equals_yolov8n_with_the_same_weights():
     base_cfg, adapter_cfg = VARIANTS["yolov8n"], VARIANTS["yolov8n_adapter"]
     base_vars = random_variables(base_cfg, 1)
     adapter_vars = with_base_weights(random_variables(adapter_cfg, 2), base_vars)
-    x = {k: jnp.asarray(v) for k, v in adapter_cfg.dummy_inputs(2, 3, TINY_HW).items()}
+    x = {k: jnp.asarray(v) for k, v in adapter_cfg.dummy_inputs(2, 3, hw=TINY_HW).items()}
     run_base, run_adapter = quick_jit(base_cfg.build().apply), quick_jit(adapter_cfg.build().apply)
     want = run_base(base_vars, x)
     assert all(np.isfinite(np.asarray(o)).all() for o in want)

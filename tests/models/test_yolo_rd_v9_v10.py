@@ -26,7 +26,7 @@ COCO80 = tuple(f"class{i}" for i in range(80))
 @functools.lru_cache(maxsize=None)
 def shapes(cfg, hw=TINY_HW, batch: int = 1):
     """(output shapes, variable shapes) without compiling anything."""
-    x = {k: jnp.asarray(v) for k, v in cfg.dummy_inputs(batch, 0, hw).items()}
+    x = {k: jnp.asarray(v) for k, v in cfg.dummy_inputs(batch, 0, hw=hw).items()}
     return jax.eval_shape(cfg.build().init_with_output, jax.random.key(0), x)
 
 
@@ -124,7 +124,7 @@ def test_adapter_at_init_equals_the_base_with_the_same_weights(base):
                 jax.tree.map(jnp.shape, shapes(adapter_cfg)[1][collection][name])
     base_vars = random_variables(base_cfg, 1)
     adapter_vars = with_base_weights(random_variables(adapter_cfg, 2), base_vars)
-    x = {k: jnp.asarray(v) for k, v in adapter_cfg.dummy_inputs(1, 3, TINY_HW).items()}
+    x = {k: jnp.asarray(v) for k, v in adapter_cfg.dummy_inputs(1, 3, hw=TINY_HW).items()}
     want = jax.tree.leaves(quick_jit(base_cfg.build().apply)(base_vars, x))
     run_adapter = quick_jit(adapter_cfg.build().apply)
     assert len(want) == (6 if base == "yolov10n" else 3) and all(np.isfinite(np.asarray(o)).all() for o in want)

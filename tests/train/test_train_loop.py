@@ -195,3 +195,20 @@ def test_object_window_sampling_favours_windows_with_boxes():
     assert share("objects") == pytest.approx(batches.OBJECT_WINDOW_SHARE + 0.2 * len(holding) / 25, abs=0.06)
     with pytest.raises(ValueError, match="window_sampling must be one of"):
         BatchStream(frames, specs, lambda boxes, grid: {}, 2, seed=0, window_sampling="random")
+
+
+def test_a_run_started_before_a_schedule_field_existed_resumes_at_its_default(tmp_path):
+    """run.json of an older version lacks Schedule fields added since (optimizer, momentum, ...):
+    at their defaults the setup is the same; at another value it is a new setup."""
+    import dataclasses
+
+    from dsfec_jax.core import atomic
+    from dsfec_jax.train.loop import RunMismatch, _started_with
+    from dsfec_jax.train.schedules import get_schedule
+
+    schedule = dataclasses.asdict(get_schedule("quick"))
+    old = {k: v for k, v in schedule.items() if k not in ("optimizer", "momentum")}
+    atomic.write_json(tmp_path / "run.json", {"seed": 0, "schedule": old})
+    assert _started_with(tmp_path, {"seed": 0, "schedule": schedule}) is not None
+    with pytest.raises(RunMismatch, match="schedule.optimizer"):
+        _started_with(tmp_path, {"seed": 0, "schedule": {**schedule, "optimizer": "sgd"}})

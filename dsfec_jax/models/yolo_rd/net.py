@@ -50,7 +50,13 @@ class YoloRDNet(nn.Module):
 
         return self.backbone(image, train, exchange)
 
-    def __call__(self, inputs: dict, train: bool = False):
+    def __call__(self, inputs: dict | None = None, train: bool = False, **maps):
+        """Raw head maps of the representations in `inputs` ({name: map}), or given by name
+        (`heat=..., gray=...`: how zoo.Detector passes every family's inputs)."""
+        inputs = {**(inputs or {}), **maps}
+        missing = [n for n in self.cfg.input_names if n not in inputs]
+        if missing:
+            raise ValueError(f"{self.cfg.name}: inputs {sorted(inputs)} lack {missing}; it reads {self.cfg.input_names}")
         return self.head(self.neck(self.features(inputs, train), train), train)
 
 

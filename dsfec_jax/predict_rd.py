@@ -1,0 +1,98 @@
+"""From range-Doppler maps to scored 2D boxes: representations (host, numpy) -> jitted network,
+DFL decode and class-aware NMS (one compiled graph, models/yolo_rd/decode.detect) -> boxes in map
+pixels (host).
+
+The NMS runs in the graph because it is fixed-shape there (the anchors of a map are few: 336 at
+256x64) and a compiled pass costs less than a host round trip; evaluation settings follow the paper
+(NMS IoU 0.1, after DAROD) and ultralytics' validator (conf 0.001, at most 300 boxes, multi-label).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import jax
+import numpy as np
+
+from . import zoo
+from .boxes.boxes2d import Boxes2D
+from .data.rd.batches import boxes_to_map, rd_eval_inputs
+from .data.rd.representations import RDRepresentation
+from .data.rd.sample import RDSample
+from .models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET, detect
+from .models.yolo_rd.net import inference_maps
+
+OUTPUTS = ("boxes", "scores", "labels", "valid")  # what the compiled post-processing returns, per image
+
+
+def detecting_network(detector, iou_threshold: float = EVAL_IOU, score_threshold: float = EVAL_CONF,
+                      max_detections: int = EVAL_MAX_DET):
+    """fn(variables, inputs) -> (boxes (B, K, 4) xyxy input pixels, scores (B, K), labels (B, K),
+    valid (B, K)): the network, then its decode and NMS (what the predictor jits and export writes)."""
+    cfg = detector.config
+
+    def run(variables, inputs):
+        maps = inference_maps(detector.apply(variables, inputs))
+        return detect(maps, iou_threshold, score_threshold, max_detections, cfg.strides, cfg.reg_max)
+
+    return run
+
+
+class RDPipeline:
+    """What every runtime shares: representations on the host, the runtime's `run(inputs)` (network +
+    decode + NMS), then boxes back to map pixels with class names. A subclass sets `classes`,
+    `representation`, `input_names` and `run`."""
+
+    classes: tuple[str, ...]
+    representation: RDRepresentation
+    input_names: tuple[str, ...]
+
+    def run(self, inputs: dict) -> tuple[np.ndarray, ...]:
+        raise NotImplementedError
+
+    def __call__(self, sample: RDSample) -> Boxes2D:
+        return self.predict_samples([sample])[sample.sample_id]
+
+    def predict_samples(self, samples: Sequence[RDSample], batch_size: int = 8) -> dict[str, Boxes2D]:
+        """sample id -> detections (map pixels, scores), in batches of maps of one fitted size."""
+        out = {}
+        samples = [samples[i] for i in range(len(samples))]
+        for start in range(0, len(samples), batch_size):
+            chunk = [rd_eval_inputs(s, self.representation, self.classes) for s in samples[start:start + batch_size]]
+            for group in _same_size(chunk):
+                inputs = {k: np.concatenate([chunk[i][k] for i in group]) for k in self.input_names}
+                boxes, scores, labels, valid = (np.asarray(a) for a in self.run(inputs))
+                for j, i in enumerate(group):
+                    sid = samples[start + i].sample_id
+                    out[sid] = self._boxes(boxes[j], scores[j], labels[j], valid[j], chunk[i])
+        return out
+
+    def _boxes(self, boxes, scores, labels, valid, arrays: dict) -> Boxes2D:
+        keep = np.flatnonzero(valid)
+        xyxy = boxes_to_map(boxes[keep], arrays["to_map_scale"], arrays["map_hw"])
+        names = np.array([self.classes[int(c)] for c in labels[keep]], dtype="<U16")
+        return Boxes2D(xyxy.astype(np.float32), names, scores[keep].astype(np.float32))
+
+
+def _same_size(chunk: list[dict]) -> list[list[int]]:
+    """Indices of the chunk grouped by fitted input size (a batch needs one size)."""
+    groups: dict[tuple, list[int]] = {}
+    for i, arrays in enumerate(chunk):
+        groups.setdefault(arrays["heat"].shape[1:3], []).append(i)
+    return list(groups.values())
+
+
+class RDPredictor(RDPipeline):
+    """`predictor(sample) -> Boxes2D` (map pixels) with the jitted JAX network, decode and NMS."""
+
+    def __init__(self, detector, variables, representation: RDRepresentation = RDRepresentation(),
+                 score_threshold: float = EVAL_CONF, nms_iou: float = EVAL_IOU, max_detections: int = EVAL_MAX_DET):
+        zoo.require_modality(detector.config, "rd", "RDPredictor")
+        self.detector, self.variables = detector, variables
+        self.classes, self.representation = tuple(detector.config.classes), representation
+        self.input_names = detector.config.input_names
+        self.score_threshold, self.nms_iou, self.max_detections = score_threshold, nms_iou, max_detections
+        self.network = jax.jit(detecting_network(detector, nms_iou, score_threshold, max_detections))
+
+    def run(self, inputs: dict):
+        return jax.device_get(self.network(self.variables, inputs))

@@ -1,0 +1,53 @@
+"""Train a range-Doppler zoo detector (the YOLO-RD family) on RD samples, validating with the
+family's protocol (COCO mAP@50 headline, evaluate_rd): `train.fit.fit` hands RD models here, so
+`dsfec train` and search trials reach it the same way as the point-cloud families.
+
+Batches come from data.rd.batches.RDBatchStream (batch s a pure function of (seed, s): resumed runs
+see the same data); the loop (train.loop) is the shared one: resumable run directory, JSONL metrics,
+last-N and best checkpoints, background batch building.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Sequence
+
+from .. import zoo
+from ..core.provenance import jsonable, versions
+from ..data.rd.augment import RDAugment
+from ..data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
+from ..data.rd.representations import RDRepresentation
+from ..data.rd.sample import RDSample
+from ..evaluate_rd import evaluate_rd
+from ..predict_rd import RDPredictor
+from .loop import RunSpec, train
+from .schedules import Schedule
+
+
+def fit_rd(model: str, overrides: dict, samples: Sequence[RDSample], val: Sequence[RDSample], schedule: Schedule,
+           run_dir: str | Path, seed: int = 0, steps: int | None = None, augment: bool = True,
+           eval_every: int | None = 200, run_info: dict | None = None, progress: bool = True,
+           init_variables: dict | None = None, representation: RDRepresentation = RDRepresentation(),
+           max_boxes: int = DEFAULT_MAX_BOXES) -> tuple[zoo.Detector, dict, dict]:
+    """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val scores)."""
+    det = zoo.create(model, **overrides)
+    family = zoo.require_modality(det.config, "rd", "fit_rd")
+    stream = RDBatchStream(samples, schedule.batch_size, seed, RDAugment() if augment else None, representation,
+                           det.config.classes, max_boxes)
+    total = steps or schedule.total_steps(len(samples))
+    spec = RunSpec(Path(run_dir), schedule, seed, total_steps=total, progress=progress)
+    info = {**(run_info or {}), "model": model, "overrides": jsonable(overrides),
+            "config": jsonable(dataclasses.asdict(det.config)), "schedule": jsonable(dataclasses.asdict(schedule)),
+            "seed": seed, "steps": total, "train_samples": len(samples), "val_samples": len(val),
+            "augment": jsonable(dataclasses.asdict(stream.augment)) if stream.augment else None,
+            "representation": jsonable(dataclasses.asdict(representation)), "max_boxes": max_boxes,
+            "versions": versions()}
+
+    def validate(state):
+        variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
+        return evaluate_rd(RDPredictor(det, variables, representation), val)[0]
+
+    state, scores = train(det, stream, spec, info, validate, eval_every or total, init_variables=init_variables,
+                          best_key=family.metric.headline)
+    return det, state, scores if scores is not None else validate(state)
