@@ -1,8 +1,14 @@
-"""`dsfec train | eval | predict` (also `python -m dsfec_jax ...`): thin commands over the library.
+"""`dsfec train | eval | predict | ship | export | quantize | bench` (also `python -m dsfec_jax ...`):
+thin commands over the library, the same flags for every family.
 
     dsfec train   --model dsfec_s [--set stem_filters=16] [--data synthetic] [--schedule quick] --run-dir runs/s
     dsfec eval    --model dsfec_s [--weights PATH] --data synthetic --split test --seed 0 --frames 200 --json
     dsfec predict --model dsfec_s [--weights PATH] --data tj4d:PATH --split all --out pred.json [--png-dir DIR]
+    dsfec train   --model yolov8n [--data synthetic] [--schedule quick] --run-dir runs/v8n
+    dsfec predict --model yolov8n --weights runs/v8n/checkpoints/best.msgpack --out dets.json --gt-out gt.json --png-dir png
+
+Each command asks the model's family what it reads (zoo.family_of(name).modality) and hands
+range-Doppler models to cli_rd, where the RD readings of the shared flags are documented.
 """
 
 from __future__ import annotations
@@ -16,6 +22,8 @@ from pathlib import Path
 
 from .argtypes import non_negative_int, positive_int
 from .core.defaults import RUN_PILLARS
+
+POINT_SCORE_THRESHOLD = 0.05  # eval/predict of point-cloud models (RD models: cli_rd, the paper's 0.001)
 
 INFER_BENCH_MODELS = "baseline,dsfec_l,dsfec_m,dsfec_s"
 TRAIN_BENCH_MODELS = "dsfec_s,dsfec_l,radarnext_fpn"  # the issue-20 acceptance models; 'all' for every variant
@@ -38,11 +46,15 @@ def parse_overrides(items: list[str]) -> dict:
 def common(p: argparse.ArgumentParser, split: str) -> None:
     p.add_argument("--model", required=True, help="a zoo name (dsfec_jax.zoo.available())")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
-    p.add_argument("--data", default="synthetic", help="synthetic | synthetic4d | vod:PATH | tj4d:PATH | nuscenes:DATAROOT")
+    p.add_argument("--data", default="synthetic",
+                   help="synthetic (the family's embedded benchmark) | points: synthetic4d | vod:PATH | tj4d:PATH | "
+                        "nuscenes:DATAROOT; range-Doppler: raddet:PATH | carrada:PATH")
     p.add_argument("--split", default=split)
-    p.add_argument("--frames", type=positive_int, default=None, help="frames to use (synthetic: to generate)")
+    p.add_argument("--frames", type=positive_int, default=None,
+                   help="frames (RD models: samples) to use (synthetic: to generate)")
     p.add_argument("--seed", type=int, default=0, help="data seed (synthetic) and init seed (train)")
-    p.add_argument("--max-pillars", type=positive_int, default=RUN_PILLARS)
+    p.add_argument("--max-pillars", type=positive_int, default=None,
+                   help=f"point models: pillar slots (default {RUN_PILLARS})")
 
 
 def command_line(args) -> str:
@@ -56,7 +68,9 @@ def parse(argv=None) -> argparse.Namespace:
     t = sub.add_parser("train", help="train a zoo model (resumes an existing run directory)")
     common(t, "train")
     t.add_argument("--run-dir", required=True)
-    t.add_argument("--schedule", default="quick", choices=("quick", "paper", "radarnext"))
+    t.add_argument("--schedule", default="quick",
+                   help="quick | paper: the family's profile (points: quick / paper; range-Doppler: yolo_quick / "
+                        "yolo_paper), or any train.schedules preset (radarnext, yolo_quick, yolo_paper, ...)")
     t.add_argument("--steps", type=positive_int, default=None, help="override the schedule's length")
     t.add_argument("--batch-size", type=positive_int, default=None)
     t.add_argument("--decay-at", default=None, metavar="F1,F2",
@@ -64,10 +78,11 @@ def parse(argv=None) -> argparse.Namespace:
     t.add_argument("--val-frames", type=positive_int, default=100)
     t.add_argument("--eval-every", type=non_negative_int, default=200, help="validate every N steps (0: at the end only)")
     t.add_argument("--no-augment", action="store_true")
-    t.add_argument("--window", type=non_negative_int, default=96,
-                   help="train on overlapping WxW-cell windows of the grid (0 = the whole grid)")
-    t.add_argument("--window-sampling", default="cycle", choices=("cycle", "objects"),
-                   help="cycle the windows, or favour windows holding a box (80 %% of steps; sparse scenes)")
+    t.add_argument("--window", type=non_negative_int, default=None,
+                   help="point models: train on overlapping WxW-cell windows of the grid (default 96; 0 = the whole grid)")
+    t.add_argument("--window-sampling", default=None, choices=("cycle", "objects"),
+                   help="point models: cycle the windows (default), or favour windows holding a box "
+                        "(80 %% of steps; sparse scenes)")
     sh = sub.add_parser("ship", help="package a trained run's weights into dsfec_jax/weights with a manifest")
     sh.add_argument("--model", required=True)
     sh.add_argument("--run-dir", required=True)
@@ -78,8 +93,12 @@ def parse(argv=None) -> argparse.Namespace:
     ex.add_argument("--model", required=True)
     ex.add_argument("--weights", default=None, help="weights/checkpoint file (default: shipped weights)")
     ex.add_argument("--out", required=True, help="directory for model.onnx, model.jax_export, deploy.json")
-    ex.add_argument("--top-k", type=positive_int, default=100, help="boxes per head kept by the in-graph decode")
-    ex.add_argument("--max-pillars", type=positive_int, default=RUN_PILLARS)
+    ex.add_argument("--top-k", type=positive_int, default=None,
+                    help="point models: boxes per head kept by the in-graph decode (default 100)")
+    ex.add_argument("--max-pillars", type=positive_int, default=None,
+                    help=f"point models: pillar slots (default {RUN_PILLARS})")
+    ex.add_argument("--input-hw", default=None, metavar="H,W",
+                    help="range-Doppler models: the exported input size in map cells (default 256,64: RADDet maps)")
     ex.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
     qz = sub.add_parser("quantize", help="static INT8 (onnxruntime) of an export, calibrated on synthetic frames")
     qz.add_argument("--onnx", required=True, help="export directory (dsfec export)")
@@ -115,29 +134,69 @@ def parse(argv=None) -> argparse.Namespace:
         q = sub.add_parser(name, help=f"{name} a zoo model")
         common(q, split)
         q.add_argument("--weights", default=None, help="weights/checkpoint file (default: shipped weights)")
-        q.add_argument("--score-threshold", type=float, default=0.05)
+        q.add_argument("--score-threshold", type=float, default=None,
+                       help=f"keep detections scoring at least this (default: points {POINT_SCORE_THRESHOLD}; "
+                            "range-Doppler 0.001, the paper's evaluation setting)")
         q.add_argument("--json", action="store_true")
         q.add_argument("--runtime", default="jax", choices=("jax", "onnx"),
                        help="onnx: run an exported model (--onnx DIR from `dsfec export`) with ONNX Runtime")
         q.add_argument("--onnx", default=None, help="with --runtime onnx: the export directory")
         if name == "predict":
-            q.add_argument("--out", required=True, help="nuScenes submission JSON to write")
-            q.add_argument("--png-dir", default=None, help="also write a BEV PNG per frame here")
+            q.add_argument("--out", required=True,
+                           help="detections to write: nuScenes submission JSON (points), COCO results JSON (range-Doppler)")
+            q.add_argument("--png-dir", default=None,
+                           help="also write a PNG per frame here: BEV (points), the RD map with its boxes (range-Doppler)")
+            q.add_argument("--png-min-score", type=float, default=None,
+                           help="predicted boxes drawn on the PNGs score at least this (default: points every "
+                                "detection kept; range-Doppler 0.25, ultralytics' predict default)")
             q.add_argument("--gt-out", default=None, help="also write the frames' ground truth in the same format")
     args = p.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)
     return args
 
 
-def run_train(args) -> int:
-    from .data.points.sources import NoFrames, load_frames
-    from .train.fit import fit
-    from .train.loop import RunMismatch
-    from .train.schedules import get_schedule
-
+def model_family(name: str):
+    """The zoo family of --model, or exit listing the registered names."""
     from . import zoo
 
-    overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
+    if name not in zoo.REGISTRY:
+        sys.exit(f"--model {name!r}: not a zoo model; available: {', '.join(zoo.available())}")
+    return zoo.family_of(name)
+
+
+def is_rd(name: str) -> bool:
+    """Whether --model reads range-Doppler maps (its commands are cli_rd's)."""
+    return model_family(name).modality == "rd"
+
+
+def checked_overrides(name: str, overrides: dict) -> dict:
+    """--set (and the flags that set config fields), validated against the model's config."""
+    from . import zoo
+
+    try:
+        zoo.config(name, **overrides)
+    except (TypeError, ValueError) as err:
+        sys.exit(f"--set: {err}")
+    return overrides
+
+
+def schedule_preset(profile: str, family) -> str:
+    """--schedule's preset: a profile of the family (Family.schedules: 'quick' is yolo_quick for the
+    range-Doppler family), or a train.schedules preset named directly."""
+    from .train.schedules import SCHEDULES
+
+    name = family.schedules.get(profile, profile)
+    if name not in SCHEDULES:
+        sys.exit(f"--schedule {profile!r}: expected a profile of {sorted(family.schedules)} or a preset of "
+                 f"{sorted(SCHEDULES)}")
+    return name
+
+
+def training_schedule(args, family):
+    """The schedule of --schedule with --batch-size and --decay-at applied."""
+    from .train.schedules import get_schedule
+
+    name = schedule_preset(args.schedule, family)
     changes = {"batch_size": args.batch_size} if args.batch_size else {}
     if args.decay_at:
         try:
@@ -146,17 +205,38 @@ def run_train(args) -> int:
             sys.exit(f"--decay-at {args.decay_at!r}: expected fractions of training, e.g. 0.7,0.9")
         if not all(0 < f < 1 for f in changes["decay_at"]):
             sys.exit(f"--decay-at {args.decay_at!r}: each fraction must lie in (0, 1)")
-    sched = get_schedule(args.schedule, **changes)
-    features = zoo.input_columns(args.model)
+    sched = get_schedule(name, **changes)
+    if args.decay_at and sched.optimizer == "sgd":
+        sys.exit(f"--decay-at: schedule {name!r} (ultralytics' SGD recipe) decays linearly per epoch; "
+                 f"--decay-at applies to the step-decay schedules (quick, paper, radarnext)")
+    return sched
+
+
+def run_train(args) -> int:
+    from .data.points.sources import NoFrames, load_frames
+    from .train.fit import fit
+    from .train.loop import RunMismatch
+
+    from . import zoo
+
+    family = model_family(args.model)
+    sched = training_schedule(args, family)
     info = {"command": command_line(args),
             "data": {"source": args.data, "split": args.split}}
+    if family.modality == "rd":
+        from . import cli_rd
+        return cli_rd.train(args, checked_overrides(args.model, parse_overrides(args.set)), sched, info)
+    overrides = checked_overrides(args.model, {"max_pillars": args.max_pillars or RUN_PILLARS,
+                                               **parse_overrides(args.set)})
+    features = zoo.input_columns(args.model)
+    window = 96 if args.window is None else args.window
     try:  # an empty split, or a run directory started with another setup: the user's to fix
         frames = load_frames(args.data, args.split, args.frames or (sched.batch_size * 100), args.seed,
                              features=features)
         val = load_frames(args.data, "val", args.val_frames, args.seed, features=features)
         _, _, final = fit(args.model, overrides, frames, val, sched, args.run_dir, args.seed, args.steps,
-                          args.window or None, not args.no_augment, args.eval_every, info,
-                          window_sampling=args.window_sampling)
+                          window or None, not args.no_augment, args.eval_every, info,
+                          window_sampling=args.window_sampling or "cycle")
     except (NoFrames, RunMismatch) as err:
         sys.exit(f"dsfec train: {err}")
     print(json.dumps({"run_dir": str(args.run_dir), "final": final}))
@@ -166,19 +246,28 @@ def run_train(args) -> int:
 def run_eval_or_predict(args) -> int:
     from . import zoo
     from .data.points.sources import NoFrames, load_frames
-    from .evaluate import predict_frames, report
+    from .cli_report import print_scores
+    from .evaluate import predict_frames
 
+    if is_rd(args.model):
+        from . import cli_rd
+        return cli_rd.eval_or_predict(args, checked_overrides(args.model, parse_overrides(args.set)))
+    threshold = POINT_SCORE_THRESHOLD if args.score_threshold is None else args.score_threshold
     if args.runtime == "onnx":
         from .deploy import OrtPredictor
         if not args.onnx:
             sys.exit("--runtime onnx needs --onnx DIR (written by `dsfec export --model NAME --out DIR`)")
-        predictor = OrtPredictor(args.onnx, score_threshold=args.score_threshold)
+        predictor = OrtPredictor(args.onnx, score_threshold=threshold)
         if predictor.manifest["model"] != args.model:
             sys.exit(f"{args.onnx}: holds {predictor.manifest['model']!r}, not --model {args.model!r}")
     else:
-        overrides = {"max_pillars": args.max_pillars, **parse_overrides(args.set)}
-        predictor = zoo.load(args.model, weights=args.weights,
-                             predictor_options={"score_threshold": args.score_threshold}, **overrides)
+        overrides = checked_overrides(args.model, {"max_pillars": args.max_pillars or RUN_PILLARS,
+                                                   **parse_overrides(args.set)})
+        try:
+            predictor = zoo.load(args.model, weights=args.weights,
+                                 predictor_options={"score_threshold": threshold}, **overrides)
+        except FileNotFoundError as err:
+            sys.exit(f"dsfec {args.command}: {err} (--weights)")
     try:
         frames = load_frames(args.data, args.split, args.frames, args.seed, features=zoo.input_columns(args.model))
     except NoFrames as err:
@@ -186,16 +275,7 @@ def run_eval_or_predict(args) -> int:
     detections = predict_frames(predictor, frames)
     if args.command == "predict":
         write_predictions(args, frames, detections, predictor)
-    weights = str(args.onnx if args.runtime == "onnx" else args.weights or zoo.shipped_weights(args.model))
-    result = {"model": args.model, "runtime": args.runtime, "weights": weights, "data": args.data,
-              "split": args.split, "seed": args.seed, "frames": len(frames)}
-    scored, summary = report(zoo.family_of(args.model).metric.name, frames, detections, predictor)
-    result.update(scored)
-    if args.json:
-        print(json.dumps(result, indent=2))
-    else:
-        print(f"{args.model} on {args.data}/{args.split} ({len(frames)} frames): {summary}")
-    return 0
+    return print_scores(args, frames, detections, predictor, "frames")
 
 
 def write_predictions(args, frames, detections, predictor) -> None:
@@ -213,8 +293,40 @@ def write_predictions(args, frames, detections, predictor) -> None:
         for i in range(len(frames)):
             f = frames[i]
             safe = f.frame_id.replace("/", "_") or f"frame_{i:06d}"
-            save_bev_png(f, Path(args.png_dir) / f"{safe}.png", predictor.spec.grid,
-                         predicted=detections[f.frame_id].boxes)
+            found = detections[f.frame_id]
+            shown = found.boxes if args.png_min_score is None else found.boxes[found.scores >= args.png_min_score]
+            save_bev_png(f, Path(args.png_dir) / f"{safe}.png", predictor.spec.grid, predicted=shown)
+
+
+def ship_source(args) -> tuple[Path, dict]:
+    """The checkpoint --checkpoint picks in --run-dir, and the run's run.json."""
+    from .train.loop import checkpoints
+
+    run = Path(args.run_dir)
+    if not (run / "run.json").is_file():
+        sys.exit(f"dsfec ship: {run / 'run.json'} missing; expected a run directory written by `dsfec train`")
+    info = json.loads((run / "run.json").read_text())
+    if info.get("model", args.model) != args.model:
+        sys.exit(f"dsfec ship: {run} trained {info['model']!r}, not --model {args.model!r}")
+    last = checkpoints(run)
+    if args.checkpoint == "last" and not last:
+        sys.exit(f"dsfec ship: {run / 'checkpoints'} holds no step_*.msgpack checkpoint")
+    source = run / "checkpoints" / "best.msgpack" if args.checkpoint == "best" else last[-1]
+    if not source.is_file():
+        sys.exit(f"dsfec ship: {source} missing (no validation has run yet); try --checkpoint last")
+    return source, info
+
+
+def ship_point_predictor(model: str, source: Path, info: dict):
+    from . import zoo
+    from .predict import Predictor
+
+    # measure with the pillar slots the run validated with (RadarNeXt runs set their own)
+    max_pillars = info.get("overrides", {}).get("max_pillars", RUN_PILLARS)
+    det = zoo.create(model, max_pillars=max_pillars)
+    variables = zoo.load_variables(det, source)
+    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    return Predictor(det, variables, score_threshold=POINT_SCORE_THRESHOLD), variables
 
 
 def run_ship(args) -> int:
@@ -222,26 +334,14 @@ def run_ship(args) -> int:
     from .core import checkpoint
     from .core.provenance import versions
     from .evaluate import measure_benchmark
-    from .predict import Predictor
-    from .train.loop import checkpoints
 
-    run = Path(args.run_dir)
-    if not (run / "run.json").is_file():
-        sys.exit(f"dsfec ship: {run / 'run.json'} missing; expected a run directory written by `dsfec train`")
-    last = checkpoints(run)
-    if args.checkpoint == "last" and not last:
-        sys.exit(f"dsfec ship: {run / 'checkpoints'} holds no step_*.msgpack checkpoint")
-    source = run / "checkpoints" / "best.msgpack" if args.checkpoint == "best" else last[-1]
-    if not source.is_file():
-        sys.exit(f"dsfec ship: {source} missing (no validation has run yet); try --checkpoint last")
-    info = json.loads((run / "run.json").read_text())
-    # measure with the pillar slots the run validated with (RadarNeXt runs set their own)
-    max_pillars = info.get("overrides", {}).get("max_pillars", RUN_PILLARS)
-    det = zoo.create(args.model, max_pillars=max_pillars)
-    variables = zoo.load_variables(det, source)
-    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
-    predictor = Predictor(det, variables, score_threshold=0.05)
-    family = zoo.family_of(args.model)
+    family = model_family(args.model)
+    source, info = ship_source(args)
+    if family.modality == "rd":
+        from . import cli_rd
+        predictor, variables = cli_rd.ship_predictor(args.model, source, info)
+    else:
+        predictor, variables = ship_point_predictor(args.model, source, info)
     measured = {split: measure_benchmark(predictor, family, split, args.frames) for split in ("val", "test")}
     manifest = {"model": args.model, "source_checkpoint": str(source),
                 "step": checkpoint.read_manifest(source).get("step"), "training": info,
@@ -257,19 +357,40 @@ def run_export(args) -> int:
     from . import zoo
     from .deploy import export
 
-    det = zoo.create(args.model, max_pillars=args.max_pillars, **parse_overrides(args.set))
+    if is_rd(args.model):
+        from . import cli_rd
+        return cli_rd.export(args, checked_overrides(args.model, parse_overrides(args.set)), command_line(args))
+    if args.input_hw:
+        sys.exit(f"dsfec export: --input-hw applies to range-Doppler models; {args.model!r} reads point clouds")
+    det = zoo.create(args.model, **checked_overrides(args.model, {"max_pillars": args.max_pillars or RUN_PILLARS,
+                                                                   **parse_overrides(args.set)}))
     path = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
     if not path.is_file():
         sys.exit(f"no weights at {path}: pass --weights (a trained checkpoint or weights file)")
     variables = zoo.load_variables(det, path)
     variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
-    out = export(det, variables, args.out, top_k=args.top_k,
+    out = export(det, variables, args.out, top_k=args.top_k or 100,
                  source={"weights": str(path), "command": command_line(args)})
     print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))
     return 0
 
 
+def exported_modality(export_dir: str) -> str:
+    """What an export directory's model reads: its deploy.json's "modality" (range-Doppler exports
+    write 'rd'; point exports predate the field)."""
+    manifest = Path(export_dir) / "deploy.json"
+    if not manifest.is_file():
+        sys.exit(f"--onnx {export_dir}: no deploy.json; expected a directory written by `dsfec export`")
+    try:
+        return json.loads(manifest.read_text()).get("modality", "points")
+    except (json.JSONDecodeError, AttributeError):
+        sys.exit(f"--onnx {export_dir}: {manifest} is not a deploy.json object written by `dsfec export`")
+
+
 def run_quantize(args) -> int:
+    if exported_modality(args.onnx) == "rd":
+        from . import cli_rd
+        return cli_rd.quantize(args)
     from .data.points.sources import load_frames
     from .deploy.quantize import quantize
 

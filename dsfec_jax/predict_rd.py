@@ -1,10 +1,9 @@
-"""From range-Doppler maps to scored 2D boxes: representations (host, numpy) -> jitted network,
-DFL decode and class-aware NMS (one compiled graph, models/yolo_rd/decode.detect) -> boxes in map
-pixels (host).
+"""From range-Doppler maps to scored 2D boxes: representations (host, numpy) -> jitted network and
+DFL decode -> class-aware NMS (host by default, models/yolo_rd/decode_host; or compiled into the same
+graph, models/yolo_rd/decode.detect) -> boxes in map pixels (host).
 
-The NMS runs in the graph because it is fixed-shape there (the anchors of a map are few: 336 at
-256x64) and a compiled pass costs less than a host round trip; evaluation settings follow the paper
-(NMS IoU 0.1, after DAROD) and ultralytics' validator (conf 0.001, at most 300 boxes, multi-label).
+Evaluation settings follow the paper (NMS IoU 0.1, after DAROD) and ultralytics' validator (conf
+0.001, at most 300 boxes, multi-label); YOLOv10 decodes its one-to-one head without NMS.
 """
 
 from __future__ import annotations
@@ -19,7 +18,9 @@ from .boxes.boxes2d import Boxes2D
 from .data.rd.batches import boxes_to_map, rd_eval_inputs
 from .data.rd.representations import RDRepresentation
 from .data.rd.sample import RDSample
-from .models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET, detect
+from .models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET, decode, detect
+from .models.yolo_rd.decode_host import NMS, TOP_K, host_detections
+from .models.yolo_rd.decode_v10 import detect_nms_free
 from .models.yolo_rd.net import inference_maps
 
 OUTPUTS = ("boxes", "scores", "labels", "valid")  # what the compiled post-processing returns, per image
@@ -28,12 +29,15 @@ OUTPUTS = ("boxes", "scores", "labels", "valid")  # what the compiled post-proce
 def detecting_network(detector, iou_threshold: float = EVAL_IOU, score_threshold: float = EVAL_CONF,
                       max_detections: int = EVAL_MAX_DET):
     """fn(variables, inputs) -> (boxes (B, K, 4) xyxy input pixels, scores (B, K), labels (B, K),
-    valid (B, K)): the network, then its decode and NMS (what the predictor jits and export writes)."""
+    valid (B, K)): the network, then its decode and NMS (what the predictor jits and export writes);
+    YOLOv10 decodes its one-to-one head without NMS, as it is meant to run (`iou_threshold` unused)."""
     cfg = detector.config
 
     def run(variables, inputs):
-        maps = inference_maps(detector.apply(variables, inputs))
-        return detect(maps, iou_threshold, score_threshold, max_detections, cfg.strides, cfg.reg_max)
+        outputs = detector.apply(variables, inputs)
+        if isinstance(outputs, dict):  # YOLOv10: its one-to-one head, top-k without NMS (decode_v10)
+            return detect_nms_free(inference_maps(outputs), score_threshold, max_detections, cfg.strides, cfg.reg_max)
+        return detect(outputs, iou_threshold, score_threshold, max_detections, cfg.strides, cfg.reg_max)
 
     return run
 
@@ -82,17 +86,38 @@ def _same_size(chunk: list[dict]) -> list[list[int]]:
     return list(groups.values())
 
 
+def decoding_network(detector):
+    """fn(variables, inputs) -> (boxes (B, A, 4) xyxy input pixels, class scores (B, A, nc)): the
+    network and the DFL decode (YOLOv10: of its one-to-one head), what the host post-processing reads."""
+    cfg = detector.config
+    return lambda variables, inputs: decode(inference_maps(detector.apply(variables, inputs)), cfg.strides, cfg.reg_max)
+
+
 class RDPredictor(RDPipeline):
-    """`predictor(sample) -> Boxes2D` (map pixels) with the jitted JAX network, decode and NMS."""
+    """`predictor(sample) -> Boxes2D` (map pixels) with the jitted JAX network and decode, then the
+    post-processing: on the host by default (models/yolo_rd/decode_host: faster once a trained model
+    leaves few candidates above the confidence cut), or `postprocess="compiled"` in the same graph."""
 
     def __init__(self, detector, variables, representation: RDRepresentation = RDRepresentation(),
-                 score_threshold: float = EVAL_CONF, nms_iou: float = EVAL_IOU, max_detections: int = EVAL_MAX_DET):
+                 score_threshold: float = EVAL_CONF, nms_iou: float = EVAL_IOU, max_detections: int = EVAL_MAX_DET,
+                 postprocess: str = "host"):
         zoo.require_modality(detector.config, "rd", "RDPredictor")
+        if postprocess not in ("host", "compiled"):
+            raise ValueError(f"RDPredictor postprocess={postprocess!r}; expected 'host' or 'compiled'")
         self.detector, self.variables = detector, variables
         self.classes, self.representation = tuple(detector.config.classes), representation
         self.input_names = detector.config.input_names
         self.score_threshold, self.nms_iou, self.max_detections = score_threshold, nms_iou, max_detections
-        self.network = jax.jit(detecting_network(detector, nms_iou, score_threshold, max_detections))
+        self.postprocess = postprocess
+        self.kind = TOP_K if detector.config.arch == "v10" else NMS  # YOLOv10 runs NMS-free
+        if postprocess == "compiled":
+            self.network = jax.jit(detecting_network(detector, nms_iou, score_threshold, max_detections))
+        else:
+            self.network = jax.jit(decoding_network(detector))
 
     def run(self, inputs: dict):
-        return jax.device_get(self.network(self.variables, inputs))
+        out = jax.device_get(self.network(self.variables, inputs))
+        if self.postprocess == "compiled":
+            return out
+        boxes, scores = (np.asarray(a) for a in out)
+        return host_detections(boxes, scores, self.kind, self.nms_iou, self.score_threshold, self.max_detections)

@@ -28,7 +28,7 @@ class Recipe:
     train_frames: int
     val_frames: int
     grid: Grid | None          # None: the model's own grid
-    max_pillars: int
+    max_pillars: int | None    # None: not a point-cloud family
     window: int | None         # training windows (cells); None: the whole (recipe) grid
     latency_repeats: int
     supernet_steps: int | None  # --strategy oneshot: steps of the one supernet, shared by all candidates
@@ -37,7 +37,7 @@ class Recipe:
     data: str = "synthetic"    # the source a search reads when --data is not given
 
     def model_overrides(self) -> dict:
-        out = {"max_pillars": self.max_pillars}
+        out = {} if self.max_pillars is None else {"max_pillars": self.max_pillars}
         if self.grid is not None:
             out["grid"] = self.grid
         return out

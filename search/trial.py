@@ -62,10 +62,10 @@ def run_trial(trial: dict, run_dir: str | Path) -> dict:
 
 
 def flat_metrics(scores: dict) -> dict:
-    """Per-class APs of the VoD protocol as top-level keys (AP_car, AP_corridor_car, ...), so a
+    """Per-class APs of the VoD and RD protocols as top-level keys (AP_car, AP_corridor_car, AP50_car, ...), so a
     report column reads them like the headline figures; DSFEC's scores pass through."""
     out = dict(scores)
-    for group in ("AP", "AP_corridor"):
+    for group in ("AP", "AP_corridor", "AP50"):
         if isinstance(scores.get(group), dict):
             out.update({f"{group}_{cls}": v for cls, v in scores[group].items()})
     return out
@@ -89,12 +89,20 @@ def measured(scores: dict, tables: dict, costs: dict) -> dict:
     return out
 
 
+def load_data(family, data: str, split: str, count: int):
+    """The frames (point families) or RD samples (range-Doppler ones) a trial trains or validates on."""
+    if family.modality == "rd":
+        from dsfec_jax.data.rd.sources import load_rd_samples
+        return load_rd_samples(data, split, count, seed=0)
+    return load_frames(data, split, count, seed=0, features=family.input_columns)
+
+
 def measure(trial: dict, trial_dir: Path) -> dict:
     recipe = get_recipe(trial["recipe"], trial["base"])
     family = zoo.family_of(trial["base"])
     overrides = {**trial["overrides"], **recipe.model_overrides()}
-    frames = load_frames(trial["data"], "train", recipe.train_frames, seed=0, features=family.input_columns)
-    val = load_frames(trial["data"], "val", recipe.val_frames, seed=0, features=family.input_columns)
+    frames, val = (load_data(family, trial["data"], split, n) for split, n in
+                   (("train", recipe.train_frames), ("val", recipe.val_frames)))
     _, _, scores = fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
                        window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
                        init_variables=initial_variables(trial.get("init", "scratch")),

@@ -63,3 +63,14 @@ def test_point_models_are_refused_by_the_rd_predictor():
 def test_rd_sources_refuse_bad_requests(data, split, count, match):
     with pytest.raises((NoSamples, ValueError, FileNotFoundError), match=match):
         load_rd_samples(data, split, count)
+
+
+def test_host_and_compiled_postprocessing_give_the_same_detections(samples):
+    det = zoo.create("yolov8n")
+    variables, tiny = random_variables(det, 1), RDRepresentation(fit="resize", input_hw=(64, 32))
+    host = RDPredictor(det, variables, tiny, max_detections=30).predict_samples(samples[:2])
+    compiled = RDPredictor(det, variables, tiny, max_detections=30, postprocess="compiled").predict_samples(samples[:2])
+    for k in host:
+        np.testing.assert_array_equal(host[k].names, compiled[k].names)
+        np.testing.assert_allclose(host[k].scores, compiled[k].scores, rtol=1e-5)
+        np.testing.assert_allclose(host[k].xyxy, compiled[k].xyxy, atol=1e-3)

@@ -13,15 +13,21 @@ from ..core.grid import Grid
 from ..predict import HostPipeline
 
 
-def read_manifest(path: str | Path) -> tuple[Path, dict]:
-    """DIR or DIR/model.onnx -> (model path, deploy.json contents)."""
+def read_manifest(path: str | Path, modality: str | None = None) -> tuple[Path, dict]:
+    """DIR or DIR/model.onnx -> (model path, deploy.json contents); with `modality`, a ValueError
+    unless the export is of that modality ('points' for manifests written before it was recorded)."""
     path = Path(path)
     model = path / "model.onnx" if path.is_dir() else path
     manifest = model.parent / "deploy.json"
     for p in (model, manifest):
         if not p.is_file():
             raise FileNotFoundError(f"{p}: missing; export with `dsfec export --model NAME --out DIR`")
-    return model, json.loads(manifest.read_text())
+    info = json.loads(manifest.read_text())
+    found = info.get("modality", "points")
+    if modality is not None and found != modality:
+        raise ValueError(f"{manifest}: an export of the {found!r} model {info.get('model')!r}; expected a "
+                         f"{modality!r} model's export")
+    return model, info
 
 
 def pillar_spec(manifest: dict) -> PillarSpec:
@@ -30,29 +36,42 @@ def pillar_spec(manifest: dict) -> PillarSpec:
     return PillarSpec(grid, tuple(p["features"]), int(p["max_pillars"]), int(p["max_points"]))
 
 
+def ort_session(model_path: str | Path, threads: int | None = None):
+    """An onnxruntime CPU session; `threads` sets its intra-op pool (inter-op 1), None leaves ORT's default."""
+    import onnxruntime as ort
+
+    options = ort.SessionOptions()
+    if threads:
+        options.intra_op_num_threads = threads
+        options.inter_op_num_threads = 1
+    return ort.InferenceSession(str(model_path), options, providers=["CPUExecutionProvider"])
+
+
+def run_fixed_batch(run, feeds: dict, batch_size: int, model_path) -> tuple:
+    """`run(feeds) -> outputs` of a graph exported for a fixed batch: the feeds as they are when
+    their batch is that size; item by item when the graph takes batch 1 (outputs concatenated);
+    otherwise a ValueError."""
+    n = len(next(iter(feeds.values())))
+    if n == batch_size:
+        return tuple(run(feeds))
+    if batch_size != 1:
+        raise ValueError(f"{model_path}: exported for batch {batch_size}, got {n} items")
+    parts = [run({k: v[i:i + 1] for k, v in feeds.items()}) for i in range(n)]
+    return tuple(np.concatenate([p[j] for p in parts]) for j in range(len(parts[0])))
+
+
 class OrtPredictor(HostPipeline):
     """`OrtPredictor(DIR)(points_NxF | Frame) -> Detections` with onnxruntime on the CPU."""
 
     def __init__(self, path: str | Path, score_threshold: float = 0.1, nms_iou: float = 0.2, max_boxes: int = 500,
                  threads: int | None = None):
-        import onnxruntime as ort
-
-        self.model_path, self.manifest = read_manifest(path)
+        self.model_path, self.manifest = read_manifest(path, "points")
         heads = {h: tuple(c) for h, c in self.manifest["head_classes"].items()}
         self._setup(pillar_spec(self.manifest), heads, score_threshold, nms_iou, max_boxes)
-        options = ort.SessionOptions()
-        if threads:
-            options.intra_op_num_threads = threads
-            options.inter_op_num_threads = 1
-        self.session = ort.InferenceSession(str(self.model_path), options, providers=["CPUExecutionProvider"])
+        self.session = ort_session(self.model_path, threads)
         self.batch_size = int(self.manifest["batch_size"])
 
     def run(self, batch: dict):
-        n = len(batch["points"])
-        if n != self.batch_size:  # the graph has a fixed batch: run frame by frame (batch 1) or refuse
-            if self.batch_size != 1:
-                raise ValueError(f"{self.model_path}: exported for batch {self.batch_size}, got {n} frames")
-            parts = [self.run({k: v[i:i + 1] for k, v in batch.items()}) for i in range(n)]
-            return tuple(np.concatenate([p[j] for p in parts]) for j in range(3))
         feeds = {k: np.asarray(batch[k]) for k in self.manifest["inputs"]}
-        return tuple(self.session.run(["boxes", "scores", "labels"], feeds))
+        return run_fixed_batch(lambda f: self.session.run(["boxes", "scores", "labels"], f), feeds, self.batch_size,
+                               self.model_path)

@@ -86,13 +86,25 @@ def quantize_model(src: str | Path, dst: str | Path, feeds: list[dict], per_chan
         atomic.write_bytes(Path(dst), quantized.read_bytes())
 
 
+def batch1_export(export_dir: str | Path, modality: str) -> tuple[Path, dict]:
+    """(model path, manifest) of an export to calibrate: batch 1 (a calibration feed is one frame)."""
+    model, manifest = read_manifest(export_dir, modality)
+    if manifest["batch_size"] != 1:
+        raise ValueError(f"{model}: calibrate a batch-1 export (this one has batch {manifest['batch_size']})")
+    return model, manifest
+
+
 def quantize(export_dir: str | Path, out_dir: str | Path, frames, per_channel: bool = True,
              calibration: str = "minmax") -> dict:
     """Write OUT_DIR/model.onnx (INT8 QDQ) and its deploy.json -> {'onnx', 'manifest', sizes}."""
-    model, manifest = read_manifest(export_dir)
-    if manifest["batch_size"] != 1:
-        raise ValueError(f"{model}: calibrate a batch-1 export (this one has batch {manifest['batch_size']})")
-    feeds = calibration_feeds(manifest, frames)
+    model, manifest = batch1_export(export_dir, "points")
+    return write_quantized(model, manifest, out_dir, calibration_feeds(manifest, frames), per_channel, calibration)
+
+
+def write_quantized(model: Path, manifest: dict, out_dir: str | Path, feeds: list[dict], per_channel: bool,
+                    calibration: str) -> dict:
+    """Every family's INT8 export: OUT_DIR/model.onnx calibrated on `feeds`, and the export's
+    deploy.json with what quantization did -> {'onnx', 'manifest', 'fp32_bytes', 'int8_bytes'}."""
     out_dir = Path(out_dir)
     quantize_model(model, out_dir / "model.onnx", feeds, per_channel, calibration)
     sizes = {"fp32_bytes": model.stat().st_size, "int8_bytes": (out_dir / "model.onnx").stat().st_size}

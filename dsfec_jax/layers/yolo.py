@@ -139,10 +139,17 @@ def csp_chain(x, features: int, n: int, expansion: float, block, train: bool):
     return YoloConv(features, 1, name="cv2")(jnp.concatenate(ys, axis=-1), train)
 
 
+def max_pool_padded(x_BxHxWxC, k: int, stride: int, pad: int):
+    """kxk max pool padded by `pad` on every side with -inf (PyTorch MaxPool2d's padding). The pad is
+    explicit and the pool called by keyword with padding 'VALID' because that is the form jax2onnx's
+    flax.linen.max_pool lowering accepts (keyword-only window_shape, string padding): ONNX Pad + MaxPool."""
+    x = jnp.pad(x_BxHxWxC, ((0, 0), (pad, pad), (pad, pad), (0, 0)), constant_values=-jnp.inf)
+    return nn.max_pool(x, window_shape=(k, k), strides=(stride, stride), padding="VALID")
+
+
 def max_pool_same(x_BxHxWxC, k: int):
-    """kxk stride-1 max pool padded by k // 2 with -inf (PyTorch MaxPool2d's padding)."""
-    p = k // 2
-    return nn.max_pool(x_BxHxWxC, (k, k), strides=(1, 1), padding=((p, p), (p, p)))
+    """kxk stride-1 max pool padded by k // 2 with -inf: the size is kept."""
+    return max_pool_padded(x_BxHxWxC, k, 1, k // 2)
 
 
 class SPPF(nn.Module):

@@ -28,7 +28,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from .yolo import YoloConv, max_pool_same, residual
+from .yolo import YoloConv, max_pool_padded, max_pool_same, residual
 
 
 class RepConvN(nn.Module):
@@ -111,7 +111,7 @@ class ELAN1(nn.Module):
 
 def avg_pool_2x2_stride1(x_BxHxWxC):
     """avg_pool2d(2, 1, 0): every 2x2 window, one row and column fewer (the AConv/ADown prefilter)."""
-    return nn.avg_pool(x_BxHxWxC, (2, 2), strides=(1, 1), padding="VALID")
+    return nn.avg_pool(x_BxHxWxC, window_shape=(2, 2), strides=(1, 1), padding="VALID")  # keywords: jax2onnx
 
 
 class AConv(nn.Module):
@@ -135,7 +135,7 @@ class ADown(nn.Module):
         x1, x2 = jnp.split(avg_pool_2x2_stride1(x), 2, axis=-1)
         c = self.features // 2
         x1 = YoloConv(c, 3, 2, name="cv1")(x1, train)
-        x2 = nn.max_pool(x2, (3, 3), strides=(2, 2), padding=((1, 1), (1, 1)))
+        x2 = max_pool_padded(x2, 3, 2, 1)
         return jnp.concatenate([x1, YoloConv(c, 1, name="cv2")(x2, train)], axis=-1)
 
 

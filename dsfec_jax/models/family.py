@@ -52,14 +52,16 @@ class SearchRecipe:
     """How much a search trial of this family trains and where it is measured (search.recipes
     turns it into a Recipe). `schedule` names a train.schedules preset; `schedule_changes`
     override its fields; `grid` None keeps the model's own grid; `window` None trains on the
-    whole (recipe) grid; `supernet_steps` None means the schedule's length."""
+    whole (recipe) grid; `supernet_steps` None means the schedule's length. `max_pillars`, `grid`
+    and `window` are the point families' (None for a range-Doppler family: frames are then RD
+    samples)."""
 
     schedule: str
     schedule_changes: Mapping[str, Any]
     train_frames: int
     val_frames: int
     grid: Any
-    max_pillars: int
+    max_pillars: int | None
     window: int | None
     latency_repeats: int
     supernet_steps: int | None

@@ -1,7 +1,9 @@
 """python -m dsfec_jax.profile --models baseline,dsfec_l,dsfec_m,dsfec_s [--json] [--paper]
 
 Prints one record per model (params, GFLOPs per stage with XLA's count beside it, memory,
-jitted batch-1 latency per stage). --threads must be handled before XLA starts (first jax computation).
+jitted batch-1 latency per stage), for any zoo family: range-Doppler models (yolov8n, ...) are
+profiled on 256 x 64 maps with their own stages (rd.py). --threads must be handled before XLA
+starts (first jax computation).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--warmup", type=int, default=3)
     p.add_argument("--threads", type=int, default=None, help="CPU threads for XLA (the process is pinned to this many CPUs)")
     p.add_argument("--out", default=None, help="also write {command, records} JSON here (atomically)")
-    p.add_argument("--readme", default=None, help="regenerate the zoo table in this README from the records")
+    p.add_argument("--readme", default=None, help="regenerate the zoo table(s) in this README from the records (zoo_table.py: one per modality)")
     return p.parse_args(argv)
 
 
@@ -43,8 +45,9 @@ def human(records: list[dict]) -> str:
     for r in records:
         lat = r.get("latency_ms")
         mem = "-" if r["memory_mb"] is None else f"{r['memory_mb']:.2f}"
+        folded = f" (BN-folded {r['params_folded']:,d})" if "params_folded" in r else ""
         lines.append(
-            f"{r['model']:<15} params {r['params']:>10,d}  GFLOPs {r['gflops']:7.3f} (XLA {r['xla_gflops']:7.3f}, "
+            f"{r['model']:<15} params {r['params']:>10,d}{folded}  GFLOPs {r['gflops']:7.3f} (XLA {r['xla_gflops']:7.3f}, "
             f"{100 * r['xla_vs_analytic']:+.1f} %)  memory {mem} MB (XLA peak {r['xla_peak_mb']:.1f} MB)  "
             + (f"latency {lat:.2f} ms (p90 {r['latency_p90_ms']:.2f})" if lat else "latency -")
         )
@@ -68,7 +71,9 @@ def main(argv=None) -> int:
     recs = records.profile(records.detectors_for(names), not args.no_latency, args.repeats, args.warmup)
     print(json.dumps(recs, indent=2) if args.json else human(recs))
     if args.paper:
-        rows = compare.table1_rows(recs) + compare.table2_rows() + compare.table3_rows()
+        points = any(zoo.family_of(n).modality == "points" for n in names)
+        rows = compare.table1_rows(recs) + (compare.table2_rows() + compare.table3_rows() if points else [])
+        rows += compare.rd_rows(recs)
         print(json.dumps(rows, indent=2) if args.json else "\n" + compare.markdown(rows))
     if args.out or args.readme:
         command = "python -m dsfec_jax.profile " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))

@@ -1,9 +1,11 @@
-"""Measured records beside the DSFEC paper's Tables 1-3, with relative errors."""
+"""Measured records beside the DSFEC paper's Tables 1-3, and range-Doppler records' parameter
+counts beside the YOLOv8-Adapter paper's Tables 3-4, with relative errors."""
 
 from __future__ import annotations
 
 from .. import zoo
 from ..models.dsfec import paper
+from ..models.yolo_rd import paper as rd_paper
 from .records import size_record
 
 TABLE2_BASE = "dsfec_l"
@@ -47,6 +49,21 @@ def table3_rows() -> list[dict]:
         rec = size_record(zoo.create("dsfec_l", stage_blocks=(3, blocks, 6, 3), name=f"dsfec_l[stage2={blocks}]"))
         rows.append({"table": "3", "config": rec["model"], "metric": "gflops", "paper": ref["gflops"],
                      "ours": rec["gflops"], "rel_err": rel(rec["gflops"], ref["gflops"])})
+    return rows
+
+
+def rd_rows(records: list[dict]) -> list[dict]:
+    """Params (M, BN-folded: ultralytics' summary, the paper's convention; models/yolo_rd/paper.py)
+    of range-Doppler records beside the YOLOv8-Adapter paper's Table 3 (YOLOv8) or 4 (v9t, v10n)."""
+    rows = []
+    for r in (r for r in records if "params_folded" in r):
+        found = [(t, ref[r["model"]]) for t, ref in (("3", rd_paper.TABLE3["RADDet"]), ("4", rd_paper.TABLE4["RADDet"]))
+                 if r["model"] in ref]
+        if found:
+            table, ref = found[0]
+            ours = r["params_folded"] / 1e6
+            rows.append({"table": f"{table} (YOLOv8-Adapter)", "config": r["model"], "metric": "params M (BN-folded)",
+                         "paper": ref["params"], "ours": ours, "rel_err": rel(ours, ref["params"])})
     return rows
 
 

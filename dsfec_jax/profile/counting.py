@@ -7,6 +7,9 @@ Conventions (stated in every record):
   detection papers quote them; elementwise work (BN, activations, adds) is not counted.
   Transposed convs count only the non-zero taps. The pillar net is counted on all of its
   max_pillars x max_points slots, because the dense tensor is what runs.
+- stages: a point network's top-level modules grouped as `stage_of` groups them (stem,
+  stage1..4, neck, heads, pillar_net); a range-Doppler network's (modality 'rd') are its
+  top-level parts as they are: backbone, adapter, neck, head (`part_of`).
 """
 
 from __future__ import annotations
@@ -17,6 +20,8 @@ import dataclasses
 import flax.linen as nn
 import jax
 import numpy as np
+
+from .. import zoo
 
 PARAMS_CONVENTION = "params collection (weights, biases, BN scale/offset); BN moving stats excluded"
 FLOPS_CONVENTION = "2 x MACs of conv/deconv/linear layers at batch 1; pillar net on all P x N slots"
@@ -34,16 +39,30 @@ def stage_of(path: tuple[str, ...]) -> str:
     return top
 
 
-def count_params(variables: dict) -> dict:
-    """Total and per-stage parameter counts of a variables tree."""
+def part_of(path: tuple[str, ...]) -> str:
+    """A range-Doppler network's stage: its top-level part (backbone, adapter, neck, head)."""
+    return path[0] if path else "?"
+
+
+STAGE_NAMES = {"points": stage_of, "rd": part_of}  # modality -> module path -> stage
+
+
+def stage_namer(detector):
+    """The stage grouping of `detector`'s modality."""
+    return STAGE_NAMES[zoo.family_of(detector.config).modality]
+
+
+def count_params(variables: dict, stage_name=stage_of) -> dict:
+    """Total and per-stage parameter counts of a variables tree (`stage_name`: module path -> stage)."""
     per_stage: dict[str, int] = collections.Counter()
     for path, leaf in jax.tree_util.tree_flatten_with_path(variables["params"])[0]:
-        per_stage[stage_of((path[0].key,))] += int(np.prod(leaf.shape))
+        per_stage[stage_name((path[0].key,))] += int(np.prod(leaf.shape))
     return {"total": sum(per_stage.values()), "per_stage": dict(per_stage)}
 
 
-def layer_macs(detector, batch_size: int = 1) -> list[tuple[tuple[str, ...], str, int]]:
-    """(module path, layer kind, MACs) for every counted layer, traced without computing."""
+def layer_macs(detector, batch_size: int = 1, inputs: dict | None = None) -> list[tuple[tuple[str, ...], str, int]]:
+    """(module path, layer kind, MACs) for every counted layer, traced without computing, on
+    `inputs` (arrays or shape structs; default `detector.dummy_inputs(batch_size)`)."""
     rows = []
 
     def interceptor(next_fun, args, kwargs, context):
@@ -53,18 +72,19 @@ def layer_macs(detector, batch_size: int = 1) -> list[tuple[tuple[str, ...], str
             rows.append((tuple(module.path), type(module).__name__, int(module.macs(args[0].shape, out.shape))))
         return out
 
-    inputs = detector.dummy_inputs(batch_size)
+    inputs = detector.dummy_inputs(batch_size) if inputs is None else inputs
     variables = jax.eval_shape(detector.init, jax.random.key(0))
     with nn.intercept_methods(interceptor):
         jax.eval_shape(detector.apply, variables, inputs)
     return rows
 
 
-def count_gflops(detector) -> dict:
-    """Analytic GFLOPs (2 x MACs) in total and per stage, at batch 1."""
+def count_gflops(detector, inputs: dict | None = None) -> dict:
+    """Analytic GFLOPs (2 x MACs) in total and per stage, at batch 1 (or on `inputs`)."""
     per_stage: dict[str, float] = collections.Counter()
-    for path, _, macs in layer_macs(detector):
-        per_stage[stage_of(path)] += 2 * macs / 1e9
+    stage_name = stage_namer(detector)
+    for path, _, macs in layer_macs(detector, 1, inputs):
+        per_stage[stage_name(path)] += 2 * macs / 1e9
     return {"total": sum(per_stage.values()), "per_stage": dict(per_stage)}
 
 

@@ -11,7 +11,7 @@ import time
 import jax
 import numpy as np
 
-STAGES = ("pillar_net", "backbone", "neck_heads")
+STAGES = ("pillar_net", "backbone", "neck_heads")  # a point network's; a range-Doppler one's: rd.LATENCY_STAGES
 
 
 def timing_variables(detector, seed: int = 0) -> dict:
@@ -38,10 +38,14 @@ def timing_variables(detector, seed: int = 0) -> dict:
 
 def stage_functions(detector, variables, inputs, per_stage: bool = True) -> dict:
     """name -> zero-argument callable that runs that stage (jitted, compiled, blocking);
-    per_stage=False: the whole network only."""
+    per_stage=False: the whole network only. Range-Doppler models have their own stages (rd.py)."""
+    from . import rd
+
     full = jax.jit(detector.apply)
     calls = {"total": lambda: full(variables, inputs)}
-    if per_stage:
+    if per_stage and rd.is_rd(detector):
+        calls.update(rd.stage_functions(detector, variables, inputs))
+    elif per_stage:
         enc = jax.jit(lambda v, x: detector.apply_method(v, "encode", x["points"], x["mask"], x["coords"]))
         bb = jax.jit(lambda v, img: detector.apply_method(v, "backbone", img))
         det = jax.jit(lambda v, st: detector.apply_method(v, "detect", st))

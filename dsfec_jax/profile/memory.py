@@ -19,6 +19,13 @@ def paper_memory_mb(detector, variables) -> float | None:
     return None if measure is None else measure(detector.config, variables)
 
 
+def convention(detector) -> str:
+    """What `memory_mb` of `detector`'s record measures."""
+    if zoo.family_of(detector.config).stem_memory is None:
+        return "none: the family publishes no memory figure (see xla_peak_mb)"
+    return "stem input + output maps (float32, batch 1) + stem weights, MiB (DSFEC Table 2)"
+
+
 def xla_peak_mb(compiled) -> float:
     mem = compiled.memory_analysis()
     if mem is None:

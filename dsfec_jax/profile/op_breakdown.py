@@ -41,6 +41,7 @@ _OP_NAME = re.compile(r'metadata=\{[^}]*?op_name="([^"]*)"')
 _FUSION_KIND = re.compile(r"\bkind=(k\w+)")
 _CUSTOM_KIND = re.compile(r'"fusion_config":\{"kind":"_*([\w]+)"')
 _OPERAND = re.compile(r"%([\w.\-]+)")
+_METHOD_CALL = re.compile(r"^[A-Za-z_]\w*\.[A-Za-z_]\w*$")  # 'adapter.exchange': module.method
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,7 +120,9 @@ def phase_and_module(op_name: str, depth: int = MODULE_DEPTH) -> tuple[str, str]
     'jit(step)/transpose(jvp(DSFECNet))/DSFECNet.backbone/stage2_block0/dw/mul' ->
     ('bwd', 'DSFECNet.backbone/stage2_block0'); differentiated code outside any module (the
     loss: 'jvp()', 'jvp(jit(log_sigmoid))') -> 'loss'; code outside jvp/transpose (optimizer,
-    gradient norm, parameter update) -> ('update', 'update')."""
+    gradient norm, parameter update) -> ('update', 'update'). A module method called inside another
+    module's call starts the path: '.../Net.features/backbone/adapter.exchange/exchangers_0/...' ->
+    'adapter.exchange/exchangers_0'."""
     parts = [p for p in op_name.split(";")[0].split("/") if p]
     while parts and parts[0].startswith("jit("):  # the program's own jit(...) wrapper(s)
         parts = parts[1:]
@@ -132,6 +135,11 @@ def phase_and_module(op_name: str, depth: int = MODULE_DEPTH) -> tuple[str, str]
     path = parts[1:-1]  # the last component is the primitive ('mul', 'conv_general_dilated')
     if path and path[0] == network:  # a module's __call__ repeats the network's name
         path = path[1:]
+    # a module's method called from inside another module ('Net.features/backbone/adapter.exchange/...':
+    # the Adapter's hook, run inside the backbone's loop) is that module's work: its path starts there
+    calls = [i for i, part in enumerate(path) if i > 0 and _METHOD_CALL.match(part)]
+    if calls:
+        path = path[calls[-1]:]
     return phase, "/".join(path[:depth]) or network
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax
 
 from .. import zoo
-from . import counting, latency, memory
+from . import counting, latency, memory, rd
 from ..core.environment import environment
 
 
@@ -15,7 +15,7 @@ def size_record(detector, xla: bool = True) -> dict:
     # sizes read shapes only: tracing init (no compile) is enough, and XLA's columns lower on shapes
     variables = jax.eval_shape(detector.init, jax.random.key(0))
     inputs = detector.dummy_inputs(1)
-    params = counting.count_params(variables)
+    params = counting.count_params(variables, counting.stage_namer(detector))
     flops = counting.count_gflops(detector)
     cfg = detector.config
     record = {
@@ -29,9 +29,11 @@ def size_record(detector, xla: bool = True) -> dict:
         "gflops_per_stage": {k: round(v, 4) for k, v in flops["per_stage"].items()},
         "gflops_convention": counting.FLOPS_CONVENTION,
         "memory_mb": None if (mem := memory.paper_memory_mb(detector, variables)) is None else round(mem, 4),
-        "memory_convention": "stem input + output maps (float32, batch 1) + stem weights, MiB (DSFEC Table 2)",
+        "memory_convention": memory.convention(detector),
         "notes": cfg.notes,
     }
+    if rd.is_rd(detector):
+        record.update(rd.size_fields(variables))
     if xla:
         compiled = counting.compile_network(detector, variables, inputs)
         xla_gflops = counting.xla_gflops(compiled)
@@ -55,9 +57,9 @@ def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int
             t = times[rec["model"]]
             rec["latency_ms"] = round(t["total"]["median_ms"], 3)
             rec["latency_p90_ms"] = round(t["total"]["p90_ms"], 3)
-            rec["latency_per_stage_ms"] = {s: round(t[s]["median_ms"], 3) for s in latency.STAGES if s in t}
+            rec["latency_per_stage_ms"] = {s: round(v["median_ms"], 3) for s, v in t.items() if s != "total"}
             rec["latency_setup"] = {"batch": 1, "repeats": repeats, "warmup": warmup, "interleaved": True,
-                                    "depthwise_impl": d.config.depthwise_impl, **env}
+                                    "depthwise_impl": getattr(d.config, "depthwise_impl", None), **env}
     else:
         for rec in records:
             rec["latency_ms"] = None

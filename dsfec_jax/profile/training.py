@@ -8,7 +8,9 @@ given the family's targets by `data.batches.BatchStream`. A few are built before
 host work is not in the device figures. A family whose network takes the window's origin as an
 input (Family.origin_input) trains every window with one network, so its batches come from
 several windows; the others compile one step per window (all of one shape), so their batches
-all come from the first window.
+all come from the first window. Range-Doppler models (modality 'rd') train on whole RD maps
+made as train/fit_rd.py makes them (training_rd.py); the point settings (window, pillar slots) do not
+apply to them, so one `--models` list may hold both kinds.
 
 Each timed program is compiled ahead (`jax.jit(f).lower(...).compile()`, timed: the compile
 time), then every program of every config, and the two sgemm references (XLA's and numpy's
@@ -47,11 +49,13 @@ from .. import zoo
 from ..core import atomic
 from ..core import threads as thread_control
 from ..core.defaults import RUN_PILLARS
-from . import counting, op_breakdown
+from . import counting, op_breakdown, training_rd
 
 PROGRAMS = ("eval_forward", "train_forward", "fwd_bwd", "step")
 SGEMM_N = 2048
-STEP_SCHEDULE = "quick"  # the optimizer (clip + AdamW) is the same chain in every schedule; only the rate differs
+# the family's `quick` schedule: its optimizer is what matters here (the rates do not change the step's
+# time): clip + AdamW for the point families, ultralytics' SGD with accumulation for the RD family
+STEP_SCHEDULE = "quick"
 RECORD = Path(__file__).parent / "records" / "train_bench.json"
 README_START, README_END = "<!-- train-bench:start -->", "<!-- train-bench:end -->"
 
@@ -72,7 +76,8 @@ BUDGET_FRAMES = 400  # train frames the pillar budget is sized on: the quick sea
 class Settings:
     """What is measured: `batch` frames per step on `window`-cell training windows (None: the
     whole grid) with at most `max_pillars` slots (sized to the data as training does unless
-    `size_pillars` is False); `repeats` timed repetitions after `warmup`; the timed
+    `size_pillars` is False; these four fields are the point families', range-Doppler models
+    train on whole maps); `repeats` timed repetitions after `warmup`; the timed
     calls cycle through `distinct_batches` pre-built batches; `profile_steps` steps are traced
     for the breakdown (none when `breakdown` is False)."""
 
@@ -100,9 +105,20 @@ class Settings:
 
 # ---- inputs -------------------------------------------------------------------------------------
 
+def is_rd(name: str) -> bool:
+    return zoo.family_of(name).modality == "rd"
+
+
+def model_overrides(name: str, settings: Settings) -> dict:
+    """The config fields the settings set on model `name`: the pillar slots of a point model."""
+    return {} if is_rd(name) else {"max_pillars": settings.max_pillars}
+
+
 def training_batches(name: str, overrides: dict, settings: Settings) -> tuple[zoo.Detector, list[dict], int]:
     """(the network a step trains, `distinct_batches` device batches {'inputs', 'targets'}, the
-    number of training windows), made as train/fit.py makes them."""
+    number of training windows), made as train/fit.py makes them (RD models: training_rd.py)."""
+    if is_rd(name):
+        return training_rd.training_batches(name, overrides, settings)
     from ..data.batches import BatchStream
     from ..data.points.augment import AugmentConfig
     from ..data.points.pillarize import PillarSpec
@@ -178,9 +194,10 @@ def build_workload(name: str, label: str, overrides: dict, settings: Settings) -
     from ..train.schedules import get_schedule, optimizer
     from ..train.step import init_state, loss_function, make_train_step
 
-    overrides = {"max_pillars": settings.max_pillars, **overrides}
+    overrides = {**model_overrides(name, settings), **overrides}
     det, batches, windows = training_batches(name, overrides, settings)
-    tx = optimizer(get_schedule(STEP_SCHEDULE, batch_size=settings.batch), 1000)
+    schedule = zoo.family_of(name).schedules[STEP_SCHEDULE]
+    tx = optimizer(get_schedule(schedule, batch_size=settings.batch), 1000)
     state = init_state(det, tx, jax.random.key(settings.seed))
     variables = jax.tree.map(jnp.copy, {"params": state["params"], "batch_stats": state["batch_stats"]})
     loss_fn = loss_function(det)  # train/step.py's, the function the step differentiates
@@ -236,15 +253,15 @@ def summary(ms: list[float]) -> dict:
             "p90": round(float(np.percentile(ms, 90)), 3), "n": len(ms)}
 
 
-def analytic_forward_gflops(detector, batch: int) -> float:
-    """The profiler's analytic forward count (2 x MACs) of one batch of `batch` frames."""
-    return sum(2 * macs for _, _, macs in counting.layer_macs(detector, batch)) / 1e9
+def analytic_forward_gflops(detector, inputs: dict) -> float:
+    """The profiler's analytic forward count (2 x MACs) of one batch of `inputs`."""
+    return sum(2 * macs for _, _, macs in counting.layer_macs(detector, inputs=inputs)) / 1e9
 
 
 def figures(w: Workload, samples: dict, peak_gflop_per_s: float, batch: int) -> dict:
     """Every figure of one workload from its timing samples."""
     median = {p: float(np.median(samples[p])) for p in PROGRAMS}
-    forward = analytic_forward_gflops(w.detector, batch)
+    forward = analytic_forward_gflops(w.detector, w.batches[0]["inputs"])
     analytic = {"eval_forward": forward, "train_forward": forward, "fwd_bwd": 3 * forward, "step": 3 * forward}
     xla = {p: xla_gflops(w.compiled[p]) for p in PROGRAMS}
 
@@ -252,10 +269,11 @@ def figures(w: Workload, samples: dict, peak_gflop_per_s: float, batch: int) -> 
         return {p: None if gflops[p] is None else _significant(gflops[p] / (median[p] / 1e3)) for p in PROGRAMS}
 
     rates = {"analytic": rate(analytic), "xla": rate(xla)}
+    slots = getattr(w.detector.config, "max_pillars", None)  # point models only
     return {
         "label": w.label, "overrides": _jsonable(w.overrides),
         "input": {k: list(v.shape) for k, v in w.batches[0]["inputs"].items()},
-        "pillar_slots": int(w.detector.config.max_pillars),
+        **({} if slots is None else {"pillar_slots": int(slots)}),
         "times_ms": {p: summary(samples[p]) for p in PROGRAMS},
         "compile_s": {p: round(s, 2) for p, s in w.compile_s.items()},
         "frames_per_s": round(batch / (median["step"] / 1e3), 3),
@@ -355,7 +373,7 @@ def check_models(models: list[str], settings: Settings, compare: dict | None) ->
     for name in models:
         for label, overrides in (("default config", {}), (f"--compare {_overrides_text(compare)}", compare or {})):
             try:
-                zoo.config(name, max_pillars=settings.max_pillars, **overrides)
+                zoo.config(name, **{**model_overrides(name, settings), **overrides})
             except (TypeError, ValueError) as err:
                 raise ValueError(f"{label}: {err}") from None
 
@@ -463,13 +481,26 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True) -> str:
                   f"{'whole-grid' if s['window'] is None else str(s['window']) + '-cell'} training windows, "
                   f"{_slots_text(s)}, median of {s['repeats']} interleaved repetitions after "
                   f"{s['warmup']} warm-up. Analytic GFLOP/s count {content['flops_convention']}. Peak: "
-                  f"{content['peak_convention']}. Record: `dsfec_jax/profile/records/train_bench.json`."]
+                  f"{content['peak_convention']}. Record: `dsfec_jax/profile/records/train_bench.json`."
+                  + _rd_note(records, s)]
     for r in records:
         for c in r["configs"]:
             if c.get("breakdown"):
                 lines += ["", f"Where a step's time goes, {r['model']} ({c['label']}, {r['threads']} threads):", "",
                           op_breakdown.markdown(c["breakdown"], breakdown_rows, full)]
     return "\n".join(lines)
+
+
+def _rd_note(records: list[dict], settings: dict) -> str:
+    """What differs for the range-Doppler records of a table ('' when it has none)."""
+    rd = [r for r in records if r.get("family") and zoo.FAMILIES[r["family"]].modality == "rd"]
+    if not rd:
+        return ""
+    shape = next(iter(rd[0]["configs"][0]["input"].values()))
+    return (f" Range-Doppler models ({', '.join(r['model'] for r in rd)}): batch {settings['batch']} whole "
+            f"{shape[1]} x {shape[2]} RD maps (heat and gray) of the synthetic RD benchmark, augmented and with "
+            "padded box targets as train/fit_rd.py makes them; windows and pillar slots do not apply; the step is the "
+            "family's quick schedule's (ultralytics' SGD summing gradients to a nominal batch of 64).")
 
 
 def check_readme(readme: str | Path) -> str:

@@ -1,4 +1,5 @@
-"""The network and decode stages of each runtime, as plain callables the timing loop chains.
+"""The network and decode stages of each runtime for a point model, as plain callables the timing
+loop chains (a range-Doppler model's: stages_rd.py).
 
 jax: the detector and the family's decoder, each jitted. onnx / onnx-int8: a network-only and a
 decode-only ONNX graph (int8 quantizes the network only, calibrated on synthetic train frames), run
@@ -66,22 +67,17 @@ def onnx_graphs(det, variables, predictor, workdir: Path, int8: bool, calib_poin
 
 
 def ort_stages(paths: dict, threads: int) -> dict:
-    import onnxruntime as ort
+    from ..ort import ort_session
 
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads, opts.inter_op_num_threads = threads, 1
-    net = ort.InferenceSession(str(paths["network"]), opts, providers=["CPUExecutionProvider"])
-    dec = ort.InferenceSession(str(paths["decode"]), opts, providers=["CPUExecutionProvider"])
+    net, dec = ort_session(paths["network"], threads), ort_session(paths["decode"], threads)
     names = [i.name for i in dec.get_inputs()]
     return {"network": lambda batch: net.run(None, batch),
             "decode": lambda maps: dec.run(None, dict(zip(names, maps)))}
 
 
-def jax_throughput(det, variables, predictor, repeats: int) -> dict:
-    """Frames/s of network + decode at each batch size (batch 1 .. 8) -> {batch: fps}."""
-    from ...predict import decoded_network
-
-    fn = jax.jit(decoded_network(det, 100))
+def jax_throughput(det, variables, fn, repeats: int) -> dict:
+    """Frames/s of the jitted fn(variables, inputs) (network + decode; + NMS for an RD model, whose
+    predictor compiles it) at each batch size (batch 1 .. 8) -> {batch: fps}."""
     out = {}
     for b in JAX_BATCHES:
         x = det.dummy_inputs(b, occupancy=0.25)

@@ -1,8 +1,10 @@
-"""Interleaved timing of the chains, raw points to boxes, one call per stage.
+"""Interleaved timing of the chains, raw input to boxes, one call per stage.
 
-Stages: pillarize (host numpy), network (pillar net .. heads), decode (sigmoid, PIXOR decode,
-top-k per head), nms (host, rotated, per class). Every runtime runs the same chain of four calls on
-the same frame; within each repeat the models and runtimes alternate (A B C A B C ...) rather than
+Point models (STAGES): pillarize (host numpy), network (pillar net .. heads), decode (sigmoid, PIXOR
+decode, top-k per head), nms (host, rotated, per class). Range-Doppler models (RD_STAGES):
+representation (host numpy: the heat / gray maps fitted to the input size), network_decode (network
+and DFL decode), nms (class-aware NMS, or YOLOv10's top-k). Every runtime runs the same chain on the
+same frame; within each repeat the models and runtimes alternate (A B C A B C ...) rather than
 running one after the other, so a slow spell of a noisy shared machine hits them all alike and
 their ratios hold.
 """
@@ -12,6 +14,7 @@ from __future__ import annotations
 import time
 
 STAGES = ("pillarize", "network", "decode", "nms")
+RD_STAGES = ("representation", "network_decode", "nms")
 
 
 def chain(points, spec, stages: dict, predictor) -> list:
@@ -21,6 +24,17 @@ def chain(points, spec, stages: dict, predictor) -> list:
     return [("pillarize", lambda _: {k: v[None] for k, v in pillarize(points, spec)[0].items()}),
             ("network", stages["network"]), ("decode", stages["decode"]),
             ("nms", lambda out: predictor._postprocess(out[0][0], out[1][0], out[2][0]))]
+
+
+def rd_chain(sample, representation, input_names, stages: dict) -> list:
+    """[(stage, fn(previous output) -> output)] from an RD sample to padded detections."""
+    from ...data.rd.representations import representations
+
+    def represent(_):
+        maps = representations(sample, representation)
+        return {k: maps[k][None] for k in input_names}
+
+    return [("representation", represent), ("network_decode", stages["network_decode"]), ("nms", stages["nms"])]
 
 
 def time_chains(chains: dict, repeats: int, warmup: int) -> dict:
@@ -40,7 +54,7 @@ def time_chains(chains: dict, repeats: int, warmup: int) -> dict:
     for steps in chains.values():
         for _ in range(warmup):
             run(steps)
-    samples = {k: {s: [] for s in STAGES + ("total",)} for k in chains}
+    samples = {k: {s: [] for s, _ in steps} | {"total": []} for k, steps in chains.items()}
     for _ in range(repeats):
         for key, steps in chains.items():
             run(steps, samples[key])

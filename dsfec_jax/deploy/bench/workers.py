@@ -1,4 +1,5 @@
-"""One worker process per thread count, and `run`, which launches them and gathers their records.
+"""One worker process per thread count, and `run`, which launches them and gathers their records;
+`point_chains` / `rd_chains` build each model's chains by the modality its family reads.
 
 XLA has no thread-count flag and sizes its pool from the CPUs it may use when it starts, so each
 --threads value N runs in its own worker process (`python -m dsfec_jax.deploy.bench`) pinned to N
@@ -15,41 +16,73 @@ import sys
 import tempfile
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from ...core import threads as thread_control
-from .model_setup import model_setup
+from .model_setup import model_setup, rd_model_setup
 from .stages import jax_stages, jax_throughput, onnx_graphs, ort_stages
-from .timing import STAGES, chain, time_chains
+from .stages_rd import rd_jax_stages, rd_onnx_graph, rd_ort_stages
+from .timing import chain, rd_chain, time_chains
+
+POINT_CALIBRATION_FRAMES = 32  # synthetic train frames, seed 0
+
+
+def point_chains(name: str, runtimes: list[str], threads: int, workdir: Path, repeats: int) -> dict:
+    """runtime -> (chain of a point model, record fields)."""
+    from ...data.points.pillarize import PillarSpec, select_columns
+    from ...data.points.sources import load_frames
+    from ...predict import decoded_network
+
+    det, variables, label, points, predictor = model_setup(name)
+    spec, out = PillarSpec.of(det.config), {}
+    for rt in runtimes:
+        if rt == "jax":
+            stages = jax_stages(det, variables, predictor)
+        else:
+            calib = [select_columns(f, det.config.point_features)
+                     for f in load_frames("synthetic", "train", POINT_CALIBRATION_FRAMES, seed=0)] if rt == "onnx-int8" else []
+            stages = ort_stages(onnx_graphs(det, variables, predictor, workdir, rt == "onnx-int8", calib), threads)
+        out[rt] = (chain(points, spec, stages, predictor), {"weights": label, "points": int(len(points))})
+    if "jax" in out:
+        out["jax"][1]["throughput_fps"] = jax_throughput(det, variables, jax.jit(decoded_network(det, 100)), repeats)
+    return out
+
+
+def rd_chains(name: str, runtimes: list[str], threads: int, workdir: Path, repeats: int) -> dict:
+    """runtime -> (chain of a range-Doppler model, record fields): the native map, padded as training
+    pads it (data/rd representations, fit 'pad'), in one fixed-size graph."""
+    from ...data.rd.representations import RDRepresentation, fitted_shape
+    from ...predict_rd import detecting_network
+
+    det, variables, label, sample = rd_model_setup(name)
+    representation = RDRepresentation()
+    input_hw = fitted_shape(sample.shape, representation)
+    out = {}
+    for rt in runtimes:
+        if rt == "jax":
+            stages = rd_jax_stages(det, variables, input_hw)
+        else:
+            stages = rd_ort_stages(rd_onnx_graph(det, variables, workdir, rt == "onnx-int8", input_hw), threads)
+        out[rt] = (rd_chain(sample, representation, det.config.input_names, stages),
+                   {"weights": label, "input_hw": list(input_hw)})
+    if "jax" in out:
+        out["jax"][1]["throughput_fps"] = jax_throughput(det, variables, jax.jit(detecting_network(det)), repeats)
+    return out
 
 
 def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, warmup: int) -> list[dict]:
     """One process, one thread count: every (model, runtime) chain timed in one interleaved loop."""
+    from ... import zoo
     from ...core.environment import cpu_model, xla_threads
     from ...core.provenance import versions
-    from ...data.points.pillarize import PillarSpec
-    from ...data.points.sources import load_frames
 
-    calib = None
     chains, extra = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in models:
-            det, variables, label, points, predictor = model_setup(name)
-            spec = PillarSpec.of(det.config)
-            for rt in runtimes:
-                if rt == "jax":
-                    stages = jax_stages(det, variables, predictor)
-                else:
-                    if rt == "onnx-int8" and calib is None:
-                        from ...data.points.pillarize import select_columns
-                        calib = [select_columns(f, det.config.point_features)
-                                 for f in load_frames("synthetic", "train", 32, seed=0)]
-                    stages = ort_stages(onnx_graphs(det, variables, predictor, Path(tmp), rt == "onnx-int8", calib or []),
-                                        threads)
-                chains[(name, rt)] = chain(points, spec, stages, predictor)
-                extra[(name, rt)] = {"weights": label, "points": int(len(points))}
-            if "jax" in runtimes:
-                extra[(name, "jax")]["throughput_fps"] = jax_throughput(det, variables, predictor, repeats)
+            make = rd_chains if zoo.family_of(name).modality == "rd" else point_chains
+            for rt, (steps, fields) in make(name, runtimes, threads, Path(tmp), repeats).items():
+                chains[(name, rt)], extra[(name, rt)] = steps, fields
         samples = time_chains(chains, repeats, warmup)
     # threads: the count asked for; xla_threads: XLA's pool as observed after the runs (the truth)
     env = {"cpu": cpu_model(), "threads": threads, "xla_threads": xla_threads(),
@@ -59,7 +92,7 @@ def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, w
     for (name, rt), s in samples.items():
         med = {k: round(float(np.median(v)), 3) for k, v in s.items()}
         records.append({"model": name, "runtime": rt, "threads": threads,
-                        "stages_ms": {k: med[k] for k in STAGES}, "total_ms": med["total"],
+                        "stages_ms": {k: med[k] for k in s if k != "total"}, "total_ms": med["total"],
                         "total_p90_ms": round(float(np.percentile(s["total"], 90)), 3),
                         "fps_batch1": round(1e3 / med["total"], 2), "repeats": repeats, "warmup": warmup,
                         **extra[(name, rt)], **env})

@@ -42,7 +42,7 @@ def resize_to(x_BxHxWxC, hw: tuple[int, int]):
     h, w = x_BxHxWxC.shape[1:3]
     th, tw = hw
     if h >= th and w >= tw and h % th == 0 and w % tw == 0:
-        return x_BxHxWxC if (h, w) == (th, tw) else nn.avg_pool(x_BxHxWxC, (h // th, w // tw), (h // th, w // tw))
+        return x_BxHxWxC if (h, w) == (th, tw) else nn.avg_pool(x_BxHxWxC, window_shape=(h // th, w // tw), strides=(h // th, w // tw))
     if th >= h and tw >= w and th % h == 0 and tw % w == 0:
         return jnp.repeat(jnp.repeat(x_BxHxWxC, th // h, axis=1), tw // w, axis=2)
     return jax.image.resize(x_BxHxWxC, (x_BxHxWxC.shape[0], th, tw, x_BxHxWxC.shape[-1]), "bilinear")

@@ -9,7 +9,7 @@ one-to-many + one-to-one loss for v10n); its schedules are ultralytics' SGD reci
 
 from __future__ import annotations
 
-from ..family import Family, MetricProtocol
+from ..family import Family, MetricProtocol, SearchRecipe
 from .assigner import AssignerConfig
 from .config import YoloRDConfig
 from .loss import YoloLossConfig
@@ -37,8 +37,19 @@ RD_COCO_PROTOCOL = MetricProtocol(
              ("latency_ms", "Latency (ms)", 1)),
     keep=("mAP50", "mAP50_95", "mAP30", "mAP70", "AP50", "AP", "darod_mAP50", "darod_mAP30"))
 
+# Search trials (search/): RD samples of the embedded benchmark; no grid, pillars or windows.
+# `quick` is the CLI's quick profile (yolo_quick: batch 16, 15 epochs, ultralytics' recipe) on 600
+# samples, so a table row costs minutes, not hours, on the 2-core CPU; `paper` is the paper's
+# profile (300 epochs at batch 64) on a RADDet-sized synthetic split.
+RECIPES = {
+    "smoke": SearchRecipe("yolo_quick", {"steps": 2, "batch_size": 2}, 4, 2, None, None, None, 1,
+                          supernet_steps=None, light_profile=True),
+    "quick": SearchRecipe("yolo_quick", {}, 600, 100, None, None, None, 10, supernet_steps=None, light_profile=True),
+    "paper": SearchRecipe("yolo_paper", {}, 8000, 1000, None, None, None, 20, supernet_steps=None, light_profile=False),
+}
+
 FAMILY = Family(
     name="yolo_rd", config_class=YoloRDConfig, variants=VARIANTS, benchmark="rd-synthetic", loss=loss,
     head_classes=head_classes, metric=RD_COCO_PROTOCOL, modality="rd",
-    schedules={"quick": "yolo_quick", "paper": "yolo_paper"},
+    schedules={"quick": "yolo_quick", "paper": "yolo_paper"}, recipes=RECIPES,
 )

@@ -59,6 +59,16 @@ class YoloRDNet(nn.Module):
             raise ValueError(f"{self.cfg.name}: inputs {sorted(inputs)} lack {missing}; it reads {self.cfg.input_names}")
         return self.head(self.neck(self.features(inputs, train), train), train)
 
+    # Stages for the profiler (profile/rd.py times each alone): `features`, then these two. The
+    # Adapter runs inside `features` (its Exchangers are interleaved with the backbone's layers).
+    def neck_outputs(self, feats, train: bool = False):
+        """(N3, N4, N5) of the neck from the backbone's (P3, P4, P5)."""
+        return self.neck(feats, train)
+
+    def head_outputs(self, neck_feats, train: bool = False):
+        """The raw head maps (as `__call__` returns them) from the neck's (N3, N4, N5)."""
+        return self.head(neck_feats, train)
+
 
 def inference_maps(outputs):
     """The head maps to decode: the tuple itself, or YOLOv10's one-to-one maps (its inference head)."""

@@ -1,0 +1,213 @@
+"""The range-Doppler halves of `dsfec train | eval | predict | ship | export | quantize`: what the
+commands do for a model whose family reads RD maps (zoo.family_of(name).modality == 'rd', the
+YOLO-RD family). cli.py parses the flags, checks what both halves share (--model, --set,
+--schedule) and hands RD models here; the flags mean the same for both families, with these
+readings for RD models:
+
+- `--data synthetic` (the default) is the embedded RD benchmark (data/rd/synthetic); `raddet:PATH`
+  and `carrada:PATH` read real maps. `--frames` counts RD samples.
+- `--schedule quick|paper` is the family's profile (Family.schedules: yolo_quick / yolo_paper, the
+  ultralytics recipe); any train.schedules preset name is accepted as well.
+- train without --frames: TRAIN_SAMPLES synthetic samples, what yolo_quick is sized for (a real
+  source: its whole split).
+- eval / predict keep detections down to the paper's evaluation confidence (decode.EVAL_CONF,
+  0.001) unless --score-threshold says otherwise; predict writes COCO JSON (results list and
+  ground truth, map-pixel boxes) and one PNG per sample with its ground truth and predictions.
+- the point-cloud flags (--window, --window-sampling, --max-pillars, export's --top-k) do not apply
+  to whole RD maps: given explicitly they are refused, naming the flag, rather than ignored.
+
+This module never imports cli (the library's one-way door): cli passes what it parsed.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from . import zoo
+from .models.yolo_rd.decode import EVAL_CONF
+
+# yolo_quick (train/schedules.py) is "15 epochs over ~1000 synthetic 256x64 samples": 62 batches of
+# 16 an epoch, the 14,880 training frames its CPU timing assumes
+TRAIN_SAMPLES = 1000
+# predicted boxes drawn on a PNG: ultralytics' predict confidence (ultralytics/ultralytics:
+# ultralytics/engine/predictor.py, BasePredictor sets conf 0.25 when none is given); at the
+# evaluation confidence (0.001) a map would carry up to 300 boxes, mostly noise
+PNG_MIN_SCORE = 0.25
+# flags of the point-cloud pipeline (pillars, BEV windows, per-head top-k): attribute -> flag
+POINT_FLAGS = {"window": "--window", "window_sampling": "--window-sampling", "max_pillars": "--max-pillars",
+               "top_k": "--top-k"}
+
+
+def refuse_point_flags(args) -> None:
+    """Exit naming every point-cloud flag the user gave to an RD model (their defaults are None)."""
+    given = [flag for attr, flag in POINT_FLAGS.items() if getattr(args, attr, None) is not None]
+    if given:
+        sys.exit(f"dsfec {args.command}: {', '.join(given)} "
+                 f"{'applies' if len(given) == 1 else 'apply'} to point-cloud models (pillars, BEV windows); "
+                 f"{args.model!r} reads whole range-Doppler maps: drop {'it' if len(given) == 1 else 'them'}")
+
+
+def default_train_samples(data: str) -> int | None:
+    """Samples to train on when --frames is not given: TRAIN_SAMPLES generated ones for the
+    synthetic benchmark, the whole split (None) of a real source."""
+    return TRAIN_SAMPLES if data in ("synthetic", "rd-synthetic") else None
+
+
+def _samples(args, split: str, count: int | None, data: str | None = None) -> list:
+    """RD samples of --data (or `data`), or exit with the source's message (it names --data and
+    what was expected)."""
+    from .data.rd.sources import NoSamples, load_rd_samples
+
+    try:
+        return load_rd_samples(data or args.data, split, count, args.seed)
+    except (NoSamples, ValueError, FileNotFoundError) as err:
+        sys.exit(f"dsfec {args.command}: {err}")
+
+
+def train(args, overrides: dict, schedule, info: dict) -> int:
+    """`dsfec train` of an RD model: fit (which hands it to train.fit_rd) on RD samples."""
+    from .train.fit import fit
+    from .train.loop import RunMismatch
+
+    refuse_point_flags(args)
+    samples = _samples(args, args.split, args.frames or default_train_samples(args.data))
+    val = _samples(args, "val", args.val_frames)
+    try:
+        _, _, final = fit(args.model, overrides, samples, val, schedule, args.run_dir, args.seed, args.steps,
+                          None, not args.no_augment, args.eval_every, info)
+    except RunMismatch as err:  # a run directory started with another setup: the user's to fix
+        sys.exit(f"dsfec train: {err}")
+    print(json.dumps({"run_dir": str(args.run_dir), "final": final}))
+    return 0
+
+
+def _predictor(args, overrides: dict, score_threshold: float):
+    if args.runtime == "onnx":
+        if not args.onnx:
+            sys.exit("--runtime onnx needs --onnx DIR (written by `dsfec export --model NAME --out DIR`)")
+        from .deploy.ort_rd import OrtRDPredictor
+
+        try:
+            predictor = OrtRDPredictor(args.onnx, score_threshold=score_threshold)
+        except (FileNotFoundError, ValueError) as err:  # no export there, or another modality's
+            sys.exit(f"dsfec {args.command}: --onnx {err}")
+        if predictor.manifest["model"] != args.model:
+            sys.exit(f"{args.onnx}: holds {predictor.manifest['model']!r}, not --model {args.model!r}")
+        return predictor
+    try:
+        return zoo.load(args.model, weights=args.weights, predictor_options={"score_threshold": score_threshold},
+                        **overrides)
+    except FileNotFoundError as err:
+        sys.exit(f"dsfec {args.command}: {err}" + ("" if "--weights" in str(err) else " (--weights)"))
+
+
+def eval_or_predict(args, overrides: dict) -> int:
+    """`dsfec eval` / `dsfec predict` of an RD model: COCO mAP@50, @50-95, @30 and DAROD mAP@50."""
+    from .cli_report import print_scores
+
+    refuse_point_flags(args)
+    threshold = EVAL_CONF if args.score_threshold is None else args.score_threshold
+    samples = _samples(args, args.split, args.frames)  # a bad --data fails before any network is built
+    predictor = _predictor(args, overrides, threshold)
+    detections = predictor.predict_samples(samples)
+    if args.command == "predict":
+        write_predictions(args, samples, detections, predictor)
+    return print_scores(args, samples, detections, predictor, "samples", score_threshold=threshold)
+
+
+def write_predictions(args, samples, detections: dict, predictor) -> None:
+    """--out: the COCO results list (map pixels; image ids from the sample ids, category ids 1..C in
+    the model's class order: metrics/boxes2d/coco_json defaults); --gt-out: the ground truth as a
+    COCO object with the same ids, so the pair scores offline; --png-dir: one PNG per sample."""
+    from .core import atomic
+    from .evaluate_rd import ground_truth
+    from .metrics.boxes2d.coco_json import (coco_dets_to_list, coco_gt_to_dict, default_category_ids,
+                                            default_image_ids)
+
+    image_ids = default_image_ids([s.sample_id for s in samples])
+    category_ids = default_category_ids(predictor.classes)
+    try:
+        results = coco_dets_to_list(detections, category_ids, image_ids)
+        gt = coco_gt_to_dict(ground_truth(samples), predictor.classes, image_ids=image_ids,
+                             category_ids=category_ids) if args.gt_out else None
+    except ValueError as err:  # e.g. a source labelling a class the model does not know
+        sys.exit(f"dsfec predict: {err}")
+    atomic.write_json(args.out, results)
+    if gt is not None:
+        atomic.write_json(args.gt_out, gt)
+    if args.png_dir:
+        write_pngs(Path(args.png_dir), samples, detections, predictor,
+                   PNG_MIN_SCORE if args.png_min_score is None else args.png_min_score)
+
+
+def write_pngs(out_dir: Path, samples, detections: dict, predictor, min_score: float) -> None:
+    """<sample id>.png: heatmap and grayscale panels, ground truth in class colours, predictions
+    scoring >= min_score in magenta (data/rd/preview)."""
+    from .data.rd.preview import save_rd_png
+
+    representation = getattr(predictor, "representation", None)
+    colormap = representation.colormap if representation is not None else "viridis"
+    for i, s in enumerate(samples):
+        found = detections[s.sample_id]
+        name = s.sample_id.replace("/", "_") or f"sample_{i:06d}"
+        save_rd_png(s, out_dir / f"{name}.png", colormap, predicted=found.select(found.scores >= min_score))
+
+
+def _representation(info: dict):
+    """The representation a training run used (run.json), so shipping measures what it trained."""
+    from .data.rd.representations import RDRepresentation
+
+    fields = dict(info.get("representation") or {})
+    if fields.get("input_hw") is not None:
+        fields["input_hw"] = tuple(fields["input_hw"])
+    return RDRepresentation(**fields)
+
+
+def ship_predictor(model: str, source: Path, info: dict):
+    """(RDPredictor at the evaluation settings, variables) of a run's checkpoint, built with the
+    run's config overrides and representation."""
+    from .predict_rd import RDPredictor
+
+    det = zoo.create(model, **info.get("overrides", {}))
+    variables = zoo.load_variables(det, source)
+    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    return RDPredictor(det, variables, _representation(info)), variables
+
+
+def parse_hw(text: str) -> tuple[int, int]:
+    try:
+        hw = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        hw = ()
+    if len(hw) != 2 or min(hw) < 1:
+        sys.exit(f"--input-hw {text!r}: expected HEIGHT,WIDTH in map cells, e.g. 256,64")
+    return hw
+
+
+def export(args, overrides: dict, command: str) -> int:
+    """`dsfec export` of an RD model: deploy.export_rd (network, DFL decode; ONNX and jax.export)."""
+    refuse_point_flags(args)
+    size = {"input_hw": parse_hw(args.input_hw)} if args.input_hw else {}
+    path = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
+    if not path.is_file():
+        sys.exit(f"no weights at {path}: pass --weights (a trained checkpoint or weights file)")
+    from .deploy.export_rd import export_rd
+
+    det = zoo.create(args.model, **overrides)
+    variables = zoo.load_variables(det, path)
+    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    out = export_rd(det, variables, args.out, source={"weights": str(path), "command": command}, **size)
+    print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))
+    return 0
+
+
+def quantize(args) -> int:
+    """`dsfec quantize` of an RD export: static INT8 calibrated on synthetic RD train samples."""
+    from .deploy.quantize_rd import quantize_rd
+
+    samples = _samples(args, "train", args.calib_frames, data="synthetic")
+    out = quantize_rd(args.onnx, args.out, samples, calibration=args.calibration)
+    print(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in out.items()}, indent=2))
+    return 0

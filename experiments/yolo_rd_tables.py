@@ -1,0 +1,157 @@
+"""The YOLOv8n-Adapter paper's Tables 3-6 on the synthetic RD benchmark, ours beside the paper's:
+
+    python -m experiments.yolo_rd_tables table3|table4|table5|table6 [--profile quick|paper|smoke]
+                                         [--seeds 2] [--out RUN_DIR] [--backend ray]
+
+Table 3: YOLOv8 n/s/m/l and YOLOv8n-Adapter; Table 4: the Adapter on YOLOv8n, YOLOv9t, YOLOv10n;
+Table 5: input representations (backbone heat/gray x adapter none/gray/heat); Table 6: fusion
+options 1/2/3. Every row is a config of one network family, written as overrides of `yolov8n`, and
+trained and measured by one search trial (search/trial.py: fit with the family's recipe, COCO AP
+through pycocotools, profile). All four tables share one journal (default
+runs/experiments/yolo_rd): a row that two tables hold (YOLOv8n is in all four) trains once, and a
+killed run resumes where it stopped. With --seeds N each row trains N times; the table then gives
+mean ± sd over seeds and says whether each row's difference from the table's first row exceeds
+twice the pooled seed sd (the run-to-run noise of this budget). The paper's numbers are RADDet's
+(real data); ours are the synthetic benchmark's, so only orderings and gaps compare.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import statistics
+import sys
+from pathlib import Path
+
+from dsfec_jax.core import atomic
+from dsfec_jax.models.yolo_rd import paper
+from dsfec_jax.models.yolo_rd.variants import (TABLE5_ROWS, TABLE6_OPTIONS, VARIANTS, fusion_variant,
+                                               representation_variant)
+from search.cli import parse, parser, run_search
+from search.journal import Journal
+
+BASE = "yolov8n"
+UNCOMPARED = ("name", "notes")  # config fields that do not change the network or its training
+DEFAULT_OUT = "runs/experiments/yolo_rd"
+
+
+def overrides_of(cfg) -> dict:
+    """`cfg` as overrides of the base variant (the fields that differ, name and notes aside)."""
+    base = VARIANTS[BASE]
+    return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)
+            if f.name not in UNCOMPARED and getattr(cfg, f.name) != getattr(base, f.name)}
+
+
+def canonical_label(cfg, fallback: str) -> str:
+    """The zoo name of the variant `cfg` equals (so rows shared by tables share a trial), else `fallback`."""
+    same = [name for name, v in VARIANTS.items() if overrides_of(v) == overrides_of(cfg)]
+    return same[0] if same else fallback
+
+
+def table_rows(table: str) -> list[tuple[str, object, dict]]:
+    """(label, config, the paper's RADDet figures) of each row, in the paper's order."""
+    if table == "table3":
+        return [(n, VARIANTS[n], paper.TABLE3["RADDet"][n]) for n in ("yolov8n", "yolov8s", "yolov8m", "yolov8l",
+                                                                       "yolov8n_adapter")]
+    if table == "table4":
+        return [(n, VARIANTS[n], paper.TABLE4["RADDet"][n]) for n in paper.TABLE4["RADDet"]]
+    if table == "table5":
+        out = []
+        for backbone, adapter in TABLE5_ROWS:
+            cfg = representation_variant(backbone, adapter)
+            label = canonical_label(cfg, f"yolov8n_adapter backbone={backbone} adapter={adapter}")
+            out.append((label, cfg, {"mAP50_95": paper.TABLE5["RADDet"][(backbone, adapter)],
+                                     "backbone": backbone, "adapter": adapter or "-"}))
+        return out
+    if table == "table6":
+        return [(canonical_label(fusion_variant(o), f"yolov8n_adapter fusion={o}"), fusion_variant(o),
+                 {**paper.TABLE6["RADDet"][o], "fusion": o}) for o in TABLE6_OPTIONS]
+    raise SystemExit(f"unknown table {table!r}; expected table3, table4, table5 or table6")
+
+
+COLUMNS = {  # table -> (record key, title); each printed as "ours (paper)"
+    "table3": (("params", "Params (M)"), ("mAP50", "mAP@50"), ("mAP50_95", "mAP@50-95")),
+    "table4": (("params", "Params (M)"), ("mAP50", "mAP@50"), ("mAP50_95", "mAP@50-95")),
+    "table5": (("mAP50_95", "mAP@50-95"),),
+    "table6": (("mAP50", "mAP@50"), ("mAP70", "mAP@70"), ("mAP50_95", "mAP@50-95")),
+}
+
+
+def _value(record: dict, key: str):
+    if key == "params":
+        return record["costs"]["params"] / 1e6
+    return record["metrics"].get(key)
+
+
+def _stats(records: list[dict], key: str) -> tuple[float | None, float, int]:
+    vals = [v for v in (_value(r, key) for r in records if r["status"] == "ok") if v is not None]
+    if not vals:
+        return None, 0.0, 0
+    return statistics.fmean(vals), statistics.stdev(vals) if len(vals) > 1 else 0.0, len(vals)
+
+
+def markdown(table: str, records: list[dict]) -> str:
+    """The table: per row ours (mean ± sd over seeds) beside the paper's, and the headline's change
+    from the first row against the run-to-run noise (2 x the pooled seed sd)."""
+    rows = table_rows(table)
+    by_key = {}
+    for r in records:
+        by_key.setdefault(_row_key(r["overrides"]), []).append(r)
+    headline = COLUMNS[table][-1][0]
+    found = [by_key.get(_row_key(overrides_of(cfg)), []) for _, cfg, _ in rows]
+    sds = [_stats(recs, headline)[1] for recs in found if _stats(recs, headline)[2] > 1]
+    noise = 2 * math.sqrt(statistics.fmean([s * s for s in sds])) if sds else None
+    first = _stats(found[0], headline)[0] if found else None
+    extra = [k for k in ("backbone", "adapter", "fusion") if k in rows[0][2]]
+    head = ["row"] + extra + [f"{t} ours (paper)" for _, t in COLUMNS[table]] + ["seeds", f"Δ {headline} vs row 1"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for (label, _, ref), recs in zip(rows, found):
+        cells = [label] + [str(ref[k]) for k in extra]
+        for key, _ in COLUMNS[table]:
+            mean, sd, n = _stats(recs, key)
+            ours = "-" if mean is None else f"{mean:.{3 if key == 'params' else 1}f}" + (f" ± {sd:.1f}" if n > 1 else "")
+            cells.append(f"{ours} ({ref.get(key, '-')})")
+        mean, _, n = _stats(recs, headline)
+        cells.append(str(n))
+        delta = "-" if mean is None or first is None else f"{mean - first:+.1f}"
+        if noise is not None and mean is not None and first is not None:
+            delta += " (above noise)" if abs(mean - first) > noise else " (within noise)"
+        cells.append(delta)
+        lines.append("| " + " | ".join(cells) + " |")
+    note = (f"Noise: 2 x pooled seed sd of {headline} = {noise:.2f} points." if noise is not None
+            else "One seed per row: no noise estimate (pass --seeds 2 or more).")
+    return "\n".join(lines) + "\n\n" + note + "\n"
+
+
+def _row_key(overrides: dict) -> str:
+    return repr(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in overrides.items()))
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0].startswith("-"):
+        raise SystemExit(__doc__)
+    table, rest = argv[0], argv[1:]
+    rows = table_rows(table)
+    p = parser(f"python -m experiments.yolo_rd_tables {table}", __doc__, base=BASE)
+    args = parse(p, rest)
+    args.out = args.out or DEFAULT_OUT
+
+    def build():
+        seen, out = set(), []
+        for label, cfg, _ in rows:
+            overrides = overrides_of(cfg)
+            if _row_key(overrides) not in seen:
+                seen.add(_row_key(overrides))
+                out.append({"label": label, "overrides": overrides})
+        return out
+
+    run_search(args, f"yolo_rd_{table}", build, f"YOLO-RD {table} (synthetic RD benchmark)", BASE)
+    text = markdown(table, Journal(args.out).records())
+    atomic.write_text(Path(args.out) / f"{table}.md", f"### {table} ({args.profile} profile)\n\n{text}")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
