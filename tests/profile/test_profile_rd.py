@@ -4,6 +4,7 @@ ultralytics' published GFLOPs, stages that compose to the whole network, the RD 
 the tables. Timings are printed by the commands, never asserted."""
 
 import json
+import re
 
 import jax
 import numpy as np
@@ -85,7 +86,9 @@ def test_zoo_table_puts_rd_records_in_their_own_table(adapter_record, tmp_path):
     assert "| yolov8n_adapter |" not in only_points and "Range-Doppler" not in only_points
     assert zoo_table.markdown(mixed_payload).startswith(only_points + "\n\n| model | mAP@50 |")
     rd_table = zoo_table.markdown({**points, "records": [adapter_record]})
-    assert "| yolov8n_adapter | - | - | 3.248 M | 3.242 M | 0.649 | 0.126 / 0.326 / 0.079 / 0.119 | - | - |" in rd_table
+    # the two mAP cells come from the shipped weights' manifest ('-' without weights)
+    sizes = "| 3.248 M | 3.242 M | 0.649 | 0.126 / 0.326 / 0.079 / 0.119 | - | - |"
+    assert re.search(r"\| yolov8n_adapter \| [-0-9.]+ \| [-0-9.]+ " + re.escape(sizes), rd_table), rd_table
     readme = tmp_path / "README.md"
     readme.write_text(f"{zoo_table.START}\nold\n{zoo_table.END}\n")
     with pytest.raises(ValueError, match="zoo-rd-table"):  # never writes RD rows into the point table
