@@ -30,4 +30,5 @@ PARTS = {
 def build_parts(cfg: YoloRDConfig):
     """(backbone, neck, head) modules of `cfg.arch`, unbound (the caller names them)."""
     backbone, neck, head = PARTS[cfg.arch]
-    return backbone(cfg), neck(cfg), head(cfg.num_classes, cfg.reg_max, cfg.strides, cfg.box_bias)
+    elastic = {"width_ratios": tuple(cfg.neck_width_ratios), "full_ch0": cfg.width(256)} if cfg.elastic else {}
+    return backbone(cfg), neck(cfg), head(cfg.num_classes, cfg.reg_max, cfg.strides, cfg.box_bias, **elastic)

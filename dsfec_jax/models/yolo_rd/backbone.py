@@ -43,7 +43,7 @@ YOLOV8_MODULES = {
 def scaled_layer(table: tuple, modules: dict, cfg: YoloRDConfig, index: int) -> nn.Module:
     """Layer `index` of a (kind, yaml channels, yaml repeats, stride) table at `cfg`'s scale."""
     kind, channels, repeats, stride = table[index]
-    return modules[kind](cfg.width(channels), cfg.repeats(repeats), stride, f"layer{index}")
+    return modules[kind](cfg.backbone_width(index, channels), cfg.repeats(repeats), stride, f"layer{index}")
 
 
 backbone_layer = functools.partial(scaled_layer, BACKBONE, YOLOV8_MODULES)

@@ -27,6 +27,16 @@ what the paper leaves open is a field here. Defaults and why:
 - `adapter_layout` (1, 2, 1, 2, 1, 2, 1): mode 1 = the backbone's features are primary, mode 2 =
   the auxiliary branch's (the paper implies the alternation; Table 7 counts four mode-1 ones).
 - `fusion` 1 | 2 | 3, one for all or one per Exchanger (Table 6): see adapter.py.
+
+Elastic widths (the paper's Table 1 search space, Sec. 3.4; YOLOv8 bases only): a subnet of the
+one-shot search is an ordinary config with these ratios, trained stand-alone like any other.
+- `backbone_width_ratios`, one per backbone block 1-5, a block being a stride stage of
+  yolov8.yaml (BACKBONE_BLOCKS: layer 0; layers 1-2; 3-4; 5-6; 7-9 with SPPF);
+- `neck_width_ratios`, one per pyramid level (P3, P4, P5: the paper's "Neck & Head Block 1-3";
+  NECK_LEVELS maps the neck layers, the stride-2 Conv going to the level it produces), applied to
+  that level's Detect branches too (their widths from the full model's first level, scaled);
+- the Stem's widths are `stem_widths` themselves (the search scales them).
+A width is make_divisible(full width x ratio, 8); at ratio 1 it is the full width.
 """
 
 from __future__ import annotations
@@ -51,6 +61,8 @@ REPRESENTATIONS = {"heat": 3, "gray": 1}  # input name -> channels (pseudo-colou
 MODES = (1, 2)
 FUSIONS = (1, 2, 3)
 STRIDES = (8, 16, 32)
+BACKBONE_BLOCKS = (0, 1, 1, 2, 2, 3, 3, 4, 4, 4)  # yolov8 backbone layer -> searchable block (stride stage)
+NECK_LEVELS = {12: 1, 15: 0, 16: 1, 18: 1, 19: 2, 21: 2}  # yolov8 neck layer -> pyramid level (P3, P4, P5)
 BACKBONE_LAYERS = 10  # ultralytics layers 0-9 (Conv, Conv, C2f, Conv, C2f, Conv, C2f, Conv, C2f, SPPF)
 # The base detector: 'v8' yolov8.yaml (scales n/s/m/l/x), 'v9' yolov9t.yaml (GELAN, scale 't' only),
 # 'v10' yolov10n.yaml (scale 'n' only); value = (scales built, backbone layers). See architectures.py.
@@ -63,6 +75,11 @@ ARCHS: dict[str, tuple[tuple[str, ...], int]] = {
 
 def make_divisible(x: float, divisor: int = 8) -> int:
     return int(math.ceil(x / divisor) * divisor)
+
+
+def scaled_width(full: int, ratio: float) -> int:
+    """A width scaled by an elastic ratio: make_divisible(full x ratio, 8); the full width at 1."""
+    return int(full) if ratio == 1 else make_divisible(full * ratio, 8)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,6 +104,8 @@ class YoloRDConfig:
     # GTs (Doppler extent: median 4 px) hold no stride-8 anchor centre and would never be learned
     # (measured: 63 of 126 in one batch of 64; 0 with the rule). None: the YOLOv8-era rule.
     assign_small_side: tuple[float, float] | None = (8.0, 16.0)
+    backbone_width_ratios: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0, 1.0)  # elastic widths (module docstring)
+    neck_width_ratios: tuple[float, ...] = (1.0, 1.0, 1.0)
     notes: str = ""
 
     def __post_init__(self):
@@ -111,6 +130,21 @@ class YoloRDConfig:
     def width(self, channels: int) -> int:
         """A yolov8.yaml width at this scale."""
         return make_divisible(min(channels, self.max_channels) * self.width_multiple, 8)
+
+    def backbone_width(self, layer: int, channels: int) -> int:
+        """Backbone layer `layer`'s width: the yaml width at this scale, times its block's ratio."""
+        full = self.width(channels)
+        return scaled_width(full, self.backbone_width_ratios[BACKBONE_BLOCKS[layer]]) if self.arch == "v8" else full
+
+    def neck_width(self, layer: int, channels: int) -> int:
+        """Neck layer `layer`'s width: the yaml width at this scale, times its level's ratio."""
+        full = self.width(channels)
+        return scaled_width(full, self.neck_width_ratios[NECK_LEVELS[layer]]) if self.arch == "v8" else full
+
+    @property
+    def elastic(self) -> bool:
+        """Whether any width ratio differs from 1 (a searched subnet rather than a scale of the yaml)."""
+        return any(r != 1 for r in tuple(self.backbone_width_ratios) + tuple(self.neck_width_ratios))
 
     def repeats(self, n: int) -> int:
         """A yolov8.yaml repeat count at this scale."""
@@ -173,6 +207,12 @@ def validate(cfg: YoloRDConfig) -> None:
     need(cfg.backbone_input in REPRESENTATIONS, "backbone_input", f"one of {tuple(REPRESENTATIONS)}")
     need(cfg.adapter_input is None or cfg.adapter_input in REPRESENTATIONS, "adapter_input",
          f"None or one of {tuple(REPRESENTATIONS)}")
+    for field, n in (("backbone_width_ratios", 5), ("neck_width_ratios", 3)):
+        ratios = tuple(getattr(cfg, field))
+        need(len(ratios) == n and all(0 < float(r) <= 1 for r in ratios), field, f"{n} ratios in (0, 1]")
+    for field in ("backbone_width_ratios", "neck_width_ratios"):
+        need(cfg.arch == "v8" or all(r == 1 for r in getattr(cfg, field)), field, "all 1 unless arch is 'v8' "
+             "(elastic widths are built for the YOLOv8 bases, the paper's search space)")
     if not cfg.has_adapter:
         return
     n = len(cfg.adapter_layout)

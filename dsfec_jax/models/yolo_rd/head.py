@@ -21,6 +21,7 @@ import jax.numpy as jnp
 
 from ...layers.yolo import PaddedConv, YoloConv
 from ...layers.yolo_v10 import YoloDWConv
+from .config import scaled_width
 
 
 def class_bias(num_classes: int, stride: int) -> float:
@@ -58,14 +59,20 @@ class DetectHead(nn.Module):
     strides: tuple[int, ...] = (8, 16, 32)
     box_bias: float = 1.0
     light_classes: bool = False  # v10Detect's class branch (`light_conv`) instead of Detect's
+    # elastic widths (config.py): each level's branch widths are the full model's (from its first
+    # level's width `full_ch0`) times the level's ratio; None: ultralytics' rule on the inputs
+    width_ratios: tuple[float, ...] | None = None
+    full_ch0: int | None = None
 
     @nn.compact
     def __call__(self, feats, train: bool = False):
-        c2, c3 = branch_widths(feats[0].shape[-1], self.num_classes, self.reg_max)
+        c2, c3 = branch_widths(self.full_ch0 or feats[0].shape[-1], self.num_classes, self.reg_max)
+        ratios = self.width_ratios or (1.0,) * len(feats)
         cls_conv = light_conv if self.light_classes else full_conv
         outs = []
-        for i, (x, stride) in enumerate(zip(feats, self.strides)):
-            box = branch(x, full_conv, c2, 4 * self.reg_max, self.box_bias, f"box{i}", train)
-            cls = branch(x, cls_conv, c3, self.num_classes, class_bias(self.num_classes, stride), f"cls{i}", train)
+        for i, (x, stride, r) in enumerate(zip(feats, self.strides, ratios)):
+            box = branch(x, full_conv, scaled_width(c2, r), 4 * self.reg_max, self.box_bias, f"box{i}", train)
+            cls = branch(x, cls_conv, scaled_width(c3, r), self.num_classes, class_bias(self.num_classes, stride),
+                         f"cls{i}", train)
             outs.append(jnp.concatenate([box, cls], axis=-1))
         return tuple(outs)

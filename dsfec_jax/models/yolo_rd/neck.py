@@ -41,9 +41,10 @@ class PanNeck(nn.Module):
 
 
 def yolov8_neck_stages(cfg: YoloRDConfig) -> tuple[nn.Module, ...]:
-    w, n = cfg.width, cfg.repeats(3)
-    return (C2f(w(512), n, name="layer12"), C2f(w(256), n, name="layer15"), YoloConv(w(256), 3, 2, name="layer16"),
-            C2f(w(512), n, name="layer18"), YoloConv(w(512), 3, 2, name="layer19"), C2f(w(1024), n, name="layer21"))
+    w, n = cfg.neck_width, cfg.repeats(3)
+    return (C2f(w(12, 512), n, name="layer12"), C2f(w(15, 256), n, name="layer15"),
+            YoloConv(w(16, 256), 3, 2, name="layer16"), C2f(w(18, 512), n, name="layer18"),
+            YoloConv(w(19, 512), 3, 2, name="layer19"), C2f(w(21, 1024), n, name="layer21"))
 
 
 YoloNeck = functools.partial(PanNeck, stages=yolov8_neck_stages)

@@ -1,0 +1,165 @@
+"""The one-shot NAS engine's search side: spaces as data, the paper's evolution, NSGA-II."""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import numpy as np
+import pytest
+
+from dsfec_jax import zoo
+from search.nas.evolution import Evolution, EvolutionSettings, progress_table
+from search.nas.space import Choice, SearchSpace, SpaceError, from_key, key
+from search.nas.spaces import get_space
+
+
+def toy_space() -> SearchSpace:
+    return SearchSpace("toy", "yolov8n", (Choice("a", (1, 2, 3, 4)), Choice("b", (0.5, 1.0)), Choice("c", (1, 2, 3), "categorical"),
+                                          Choice("d", (1, 2, 3, 4)), Choice("e", (0.25, 0.5, 0.75, 1.0))),
+                       lambda c: dict(c))
+
+
+def toy_score(genes) -> dict:
+    """A deterministic landscape with one best subnet (all genes at their last option but 'c' at 0)."""
+    g = np.asarray(genes, float)
+    return {"mAP50": float(10 * g[0] + 3 * g[1] - 4 * g[2] + 2 * g[3] + g[4]), "aux": 1.0}
+
+
+def toy_costs(genes) -> dict:
+    return {"params": float(sum(genes))}
+
+
+class Counter:
+    def __init__(self, fail_after: int | None = None):
+        self.scored, self.fail_after = [], fail_after
+
+    def __call__(self, batch):
+        out = []
+        for g in batch:
+            if self.fail_after is not None and len(self.scored) >= self.fail_after:
+                raise KeyboardInterrupt("killed")
+            self.scored.append(key(g))
+            out.append(toy_score(g))
+        return out
+
+
+def test_table1_space_size_is_the_papers():
+    assert get_space("yolov8n_adapter").size() == 2 ** 20 * 3 ** 7
+    assert get_space("dsfec").size() == 4 * 3 ** 4 * 3 ** 4
+
+
+def test_space_operators_are_seeded_and_stay_in_range():
+    s = toy_space()
+    draws = [s.sample(np.random.default_rng(7)) for _ in range(2)]
+    assert draws[0] == draws[1] and s.check(draws[0]) == draws[0]
+    rng = np.random.default_rng(0)
+    parent = s.largest()
+    assert s.mutate(parent, rng, 0.0) == parent
+    mutants = [s.mutate(parent, rng, 1.0) for _ in range(400)]
+    for i, c in enumerate(s.choices):  # with prob 1 every gene is redrawn uniformly: every option appears
+        assert {m[i] for m in mutants} == set(range(len(c.options)))
+    changed = np.mean([m != p for m in (s.mutate(parent, rng, 0.1) for _ in range(2000)) for m, p in zip(m, parent)])
+    assert 0.05 < changed < 0.1  # p 0.1 per gene, a redraw keeps the option 1/len(options) of the time
+    a, b = s.smallest(), s.largest()
+    kids = [s.crossover(a, b, rng) for _ in range(200)]
+    assert all(k[i] in (a[i], b[i]) for k in kids for i in range(len(a)))
+    assert len(set(kids)) > 10
+
+
+def test_space_encode_decode_and_errors():
+    s = toy_space()
+    g = (2, 1, 0, 3, 1)
+    assert s.encode(s.decode(g)) == g and from_key(key(g)) == g
+    with pytest.raises(SpaceError, match="'a'"):
+        s.check((4, 0, 0, 0, 0))
+    with pytest.raises(SpaceError, match="expected 5 genes"):
+        s.check((0, 0))
+    with pytest.raises(SpaceError, match="c=7"):
+        s.encode({**s.decode(g), "c": 7})
+    with pytest.raises(SpaceError, match="repeat"):
+        Choice("x", (1, 1))
+
+
+def _params(model: str, **overrides) -> int:
+    det = zoo.create(model, **overrides)
+    shapes = jax.eval_shape(lambda: det.init(jax.random.key(0)))
+    return int(sum(np.prod(x.shape) for x in jax.tree.leaves(shapes["params"])))
+
+
+def test_table1_subnets_are_zoo_configs():
+    s = get_space("yolov8n_adapter")
+    assert _params(s.base, **s.overrides(s.largest())) == 3_248_056  # the largest subnet is the model itself
+    small = _params(s.base, **s.overrides(s.smallest()))
+    mid = _params(s.base, **s.overrides(s.sample(np.random.default_rng(3))))
+    assert small < mid < 3_248_056
+    d = get_space("dsfec")
+    cfg = zoo.config(d.base, **d.overrides(d.largest()))
+    assert cfg.stage_widths == zoo.config(d.base).stage_widths and cfg.stage_blocks == (3, 3, 3, 3)
+    assert cfg.stem_filters == 32 and cfg.fec_filters[-1] == 32
+
+
+def _evolution(tmp_path, scores, limits=None, **settings):
+    st = EvolutionSettings(**{"population": 12, "generations": 5, "top_k": 4, **settings})
+    return Evolution(toy_space(), scores, toy_costs, tmp_path, st, limits or {}, log=lambda *_: None)
+
+
+def test_evolution_follows_the_rules(tmp_path):
+    counter = Counter()
+    state = _evolution(tmp_path, counter, limits={"params": 9.0}).run()
+    gens = state["generations"]
+    assert len(gens) == 5 and all(len(g["top"]) == 4 for g in gens)
+    proposed = [k for g in gens for k in g["proposed"]]
+    assert len(proposed) == len(set(proposed)) == len(counter.scored)  # visited subnets never come back
+    assert all(sum(from_key(k)) <= 9 for k in proposed)  # constraints reject before scoring
+    assert sum(len(g["rejected"]) for g in gens) > 0
+    assert not set(k for g in gens for k in g["rejected"]) & set(proposed)
+    bests = [g["best"] for g in gens]
+    assert bests == sorted(bests)  # the top k only improves
+    records = {r["key"]: r for r in map(json.loads, (tmp_path / "journal.jsonl").read_text().splitlines())}
+    scored = sorted(records, key=lambda k: (-records[k]["mAP50"], k))
+    assert gens[-1]["top"] == scored[:4]
+    assert "| 4 |" in progress_table(state)
+
+
+def test_evolution_is_seeded(tmp_path):
+    a = _evolution(tmp_path / "a", Counter()).run()
+    b = _evolution(tmp_path / "b", Counter()).run()
+    c = _evolution(tmp_path / "c", Counter(), seed=1).run()
+    assert a["generations"] == b["generations"] and a["generations"] != c["generations"]
+
+
+def test_killed_evolution_resumes_to_the_same_population(tmp_path):
+    whole = _evolution(tmp_path / "whole", Counter()).run()
+    with pytest.raises(KeyboardInterrupt):
+        _evolution(tmp_path / "cut", Counter(fail_after=30)).run()  # killed inside generation 2
+    again = Counter()
+    resumed = _evolution(tmp_path / "cut", again).run()
+    assert resumed["generations"] == whole["generations"]
+    # generations 0 and 1 (24 subnets) were journalled; the batch in flight when killed is scored again
+    assert len(again.scored) == sum(len(g["proposed"]) for g in whole["generations"]) - 24
+
+
+def test_evolution_refuses_another_searchs_directory(tmp_path):
+    _evolution(tmp_path, Counter(), generations=1).run()
+    with pytest.raises(ValueError, match="settings"):
+        _evolution(tmp_path, Counter(), generations=1, top_k=3).run()
+
+
+def test_nsga2_front_is_feasible_and_resumes(tmp_path):
+    pytest.importorskip("optuna")
+    from search.nas.nsga import pareto_front, run_nsga2
+
+    counter = Counter()
+    kwargs = dict(cost="params", limits={"params": 8.0}, population=8, metric="mAP50", seed=0, log=lambda *_: None)
+    study = run_nsga2(toy_space(), counter, toy_costs, tmp_path, generations=3, **kwargs)
+    front = pareto_front(study)
+    assert front and all(r["costs"]["params"] <= 8 for r in front)
+    assert all(sum(from_key(k)) <= 8 for k in counter.scored) and len(counter.scored) == len(set(counter.scored))
+    for a in front:  # non-dominated among the front
+        assert not any(b["score"] >= a["score"] and b["cost"] <= a["cost"] and b != a and
+                       (b["score"] > a["score"] or b["cost"] < a["cost"]) for b in front)
+    more = Counter()
+    study = run_nsga2(toy_space(), more, toy_costs, tmp_path, generations=4, **kwargs)  # resume: one more generation
+    assert sum(t.state.name == "COMPLETE" for t in study.trials) == 32
+    assert not set(more.scored) & set(counter.scored)
