@@ -16,7 +16,8 @@
       1 (PAF): X_p + w * F_aux, w = sigmoid(gamma * GAP(F_aux)), one weight per channel,
                gamma a learnable scalar (0 -> w = 0.5);
       2:       X_p + F_aux (element-wise sum);
-      3:       X_p + lam * F_aux, lam a learnable scalar (0.5 at init, as option 1's w).
+      3:       X_p + lam * F_aux, lam a learnable scalar (0.5 at init, as option 1's w);
+      0:       searchable (a one-shot supernet, search/nas): all three, the option an input.
 - Choices the paper leaves open: the 1x1 conv is conv (no bias) + BN without activation (a linear
   projection keeps the sign of what it adds); resizing is area averaging when shrinking by an
   integer factor and nearest-neighbour repetition when growing by one (ultralytics' upsampling),
@@ -33,7 +34,7 @@ import jax.numpy as jnp
 
 from ...layers.coord_attention import CoordinateAttention
 from ...layers.yolo import BN_EPS, BN_MOMENTUM, YoloConv
-from .config import YoloRDConfig
+from .config import SEARCHABLE, YoloRDConfig
 
 
 def resize_to(x_BxHxWxC, hw: tuple[int, int]):
@@ -80,6 +81,8 @@ class Exchanger(nn.Module):
 
     def _aux_weight(self, f_aux):
         """The weight of the auxiliary features in the fusion (see the module docstring)."""
+        if self.fusion == SEARCHABLE:
+            return self._searchable_weight(f_aux)
         if self.fusion == 1:
             gamma = self.param("gamma", nn.initializers.zeros, ())
             return jax.nn.sigmoid(gamma * jnp.mean(f_aux, axis=(1, 2), keepdims=True))
@@ -87,7 +90,18 @@ class Exchanger(nn.Module):
             return 1.0
         if self.fusion == 3:
             return self.param("fusion_weight", nn.initializers.constant(0.5), ())
-        raise ValueError(f"fusion option {self.fusion!r}; valid: 1, 2, 3")
+        raise ValueError(f"fusion option {self.fusion!r}; valid: 1, 2, 3 (0: searchable)")
+
+    def _searchable_weight(self, f_aux):
+        """A one-shot supernet's Exchanger: it holds every option's parameters (gamma and the
+        learnable weight, initialised as in options 1 and 3) and uses the option in the variable
+        'nas'/'fusion' (an input, so one compiled step serves every choice; unchosen parameters get
+        zero gradient)."""
+        choice = self.variable("nas", "fusion", lambda: jnp.int32(1)).value
+        gamma = self.param("gamma", nn.initializers.zeros, ())
+        lam = self.param("fusion_weight", nn.initializers.constant(0.5), ())
+        paf = jax.nn.sigmoid(gamma * jnp.mean(f_aux, axis=(1, 2), keepdims=True))
+        return jnp.where(choice == 1, paf, jnp.where(choice == 2, jnp.ones_like(paf), lam))
 
 
 class Adapter(nn.Module):

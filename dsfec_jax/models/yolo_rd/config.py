@@ -60,6 +60,7 @@ RADDET_CLASSES = ("person", "bicycle", "car", "motorcycle", "bus", "truck")
 REPRESENTATIONS = {"heat": 3, "gray": 1}  # input name -> channels (pseudo-colour heatmap, grayscale)
 MODES = (1, 2)
 FUSIONS = (1, 2, 3)
+SEARCHABLE = 0  # the fusion 'option' of a one-shot supernet's Exchanger: all three, chosen per step (adapter.py)
 STRIDES = (8, 16, 32)
 BACKBONE_BLOCKS = (0, 1, 1, 2, 2, 3, 3, 4, 4, 4)  # yolov8 backbone layer -> searchable block (stride stage)
 NECK_LEVELS = {12: 1, 15: 0, 16: 1, 18: 1, 19: 2, 21: 2}  # yolov8 neck layer -> pyramid level (P3, P4, P5)
@@ -221,8 +222,8 @@ def validate(cfg: YoloRDConfig) -> None:
     layers = cfg.backbone_layers
     need(len(pos) == n and all(0 <= p < layers for p in pos) and all(a < b for a, b in zip(pos, pos[1:])),
          "exchanger_positions", f"{n} increasing backbone layer indices in 0..{layers - 1}")
-    need(len(cfg.fusions) == n and all(f in FUSIONS for f in cfg.fusions), "fusion",
-         f"one option from {FUSIONS}, or one per Exchanger ({n})")
+    need(len(cfg.fusions) == n and all(f in FUSIONS + (SEARCHABLE,) for f in cfg.fusions), "fusion",
+         f"one option from {FUSIONS} (or {SEARCHABLE}: searchable), or one per Exchanger ({n})")
     need(len(cfg.stem_widths) == len(cfg.stem_strides) >= 1 and all(int(w) >= 1 for w in cfg.stem_widths)
          and all(int(s) >= 1 for s in cfg.stem_strides), "stem_widths", "as many positive widths as stem_strides")
     need(int(cfg.attention_reduction) >= 1 and int(cfg.attention_min_mip) >= 1, "attention_reduction",

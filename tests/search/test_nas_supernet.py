@@ -1,0 +1,72 @@
+"""The weight-sharing supernet with elastic widths: a subnet taken out of it is its stand-alone network."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from dsfec_jax import zoo
+from search.nas import elastic
+from search.nas.spaces import get_space
+from conftest import random_fill
+
+
+@pytest.fixture(scope="module")
+def supernet():
+    space = get_space("yolov8n_adapter")
+    sup = elastic.supernet_of(space)
+    shapes = jax.eval_shape(lambda: sup.init(jax.random.key(0)))
+    # trained-like stand-in weights: alpha, gamma and every BN away from their initial values
+    v = {c: random_fill(shapes[c], seed=1, scale_range=(0.5, 1.5)) for c in ("params", "batch_stats")}
+    v["nas"] = jax.tree.map(lambda s: jnp.int32(1), shapes["nas"])
+    for k in range(7):  # Exchangers that matter: alpha 1 (the residual's weight), gamma 1
+        v["params"]["adapter"][f"exchangers_{k}"].update(alpha=jnp.float32(1), gamma=jnp.float32(1))
+    run = jax.jit(lambda v, x, m: elastic.masked_apply(sup, v, x, m))
+    run_train = jax.jit(lambda v, x, m: elastic.masked_apply(sup, v, x, m, train=True)[0])
+    return space, sup, v, run, run_train
+
+
+def _rel(a, b) -> float:
+    return max(float(jnp.max(jnp.abs(x - y)) / jnp.max(jnp.abs(y))) for x, y in zip(a, b))
+
+
+@pytest.mark.parametrize("seed", [0])
+def test_subnet_equals_its_standalone_network(supernet, seed):
+    space, sup, v, run, run_train = supernet
+    genes = space.sample(np.random.default_rng(seed))
+    sub = zoo.create(space.base, **space.overrides(genes))
+    masks = elastic.masks(sup, sub)
+    chosen = elastic.with_fusions(v, space.overrides(genes)["fusion"])
+    sub_vars = elastic.extract(sup, chosen, sub)
+    x = sup.dummy_inputs(2, seed=3)
+    sub_run = jax.jit(lambda v, x: sub.apply(v, x))
+    sub_train = jax.jit(lambda v, x: sub.apply(v, x, train=True)[0])
+    assert _rel(run(chosen, x, masks), sub_run(sub_vars, x)) < 2e-5  # running statistics
+    assert _rel(run_train(chosen, x, masks), sub_train(sub_vars, x)) < 2e-5  # batch statistics
+    other = tuple(2 if f == 1 else 1 for f in space.overrides(genes)["fusion"])  # every Exchanger's option changed
+    assert _rel(run(elastic.with_fusions(v, other), x, masks), sub_run(sub_vars, x)) > 1e-4  # 10x the tolerance above
+
+
+def test_one_compile_serves_every_subnet_and_idle_weights_get_no_gradient(supernet):
+    space, sup, v, _, _ = supernet
+    x = sup.dummy_inputs(1, seed=4)
+    traces = []
+
+    def loss(params, nas, masks):
+        traces.append(1)
+        out = elastic.masked_apply(sup, {**v, "params": params, "nas": nas}, x, masks)
+        return sum(jnp.sum(o ** 2) for o in out)
+
+    grad = jax.jit(jax.grad(loss))
+    smallest = zoo.create(space.base, **space.overrides(space.smallest()))
+    for genes in (space.smallest(), space.largest()):
+        sub = zoo.create(space.base, **space.overrides(genes))
+        chosen = elastic.with_fusions(v, space.overrides(genes)["fusion"])
+        g = grad(v["params"], chosen["nas"], elastic.masks(sup, sub))
+    assert len(traces) == 1
+    g = grad(v["params"], elastic.with_fusions(v, (1,) * 7)["nas"], elastic.masks(sup, smallest))
+    kernel = np.asarray(g["backbone"]["layer3"]["conv"]["kernel"])  # block 3 at 1/4: 16 of 64 outputs kept
+    assert np.abs(kernel[..., 16:]).max() == 0 and np.abs(kernel[..., :16]).max() > 0
+    assert np.asarray(g["adapter"]["exchangers_0"]["fusion_weight"]) == 0  # option 1 chosen: option 3's weight idle
