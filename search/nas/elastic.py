@@ -69,6 +69,11 @@ def param_shapes(detector) -> dict:
     return jax.eval_shape(lambda: detector.init(jax.random.key(0)))["params"]
 
 
+def block_widths(detector) -> dict[Path, int]:
+    """{conv block path: output width} of a network (from shapes only)."""
+    return {p: b["conv"]["kernel"].shape[-1] for p, b, _ in conv_blocks(param_shapes(detector))}
+
+
 def kept_outputs(supernet, subnet) -> dict[Path, np.ndarray]:
     """{conv block path: the supernet channels the subnet keeps} (same module paths in both)."""
     full = {p: (b["conv"]["kernel"].shape[-1], _halved(p[-1], parent)) for p, b, parent in conv_blocks(param_shapes(supernet))}
@@ -179,6 +184,59 @@ def _checked(index: np.ndarray, n: int, path: Path) -> np.ndarray:
     if len(index) != n:
         raise ValueError(f"{'/'.join(path)}: the probe found {len(index)} channels where the subnet has {n}")
     return index
+
+
+class MaskTable:
+    """Masks of any subnet without tracing it: each conv block's width is set by at most one gene
+    (a backbone block, a Stem conv or a pyramid level; an Exchanger's projection follows its
+    primary's), so the widths are read once per (gene, option) from the subnets that differ from
+    the largest in that gene alone (about 40 shape traces for Table 1), and a subnet's masks are
+    then look-ups: fast enough to draw a new subnet every SPOS step. A block that two genes set,
+    or a gene that adds or removes blocks (depth), is refused here (a test checks the table
+    against `masks` on sampled subnets)."""
+
+    def __init__(self, space, supernet):
+        self.space = space
+        params = param_shapes(supernet)
+        self.full = {p: (b["conv"]["kernel"].shape[-1], _halved(p[-1], parent)) for p, b, parent in conv_blocks(params)}
+        self.control: dict[Path, tuple[int, dict[int, int]]] = {}
+        largest = space.largest()
+        top = space.overrides(largest)
+        for i, choice in enumerate(space.choices):
+            for o in range(len(choice.options) - 1):
+                genes = largest[:i] + (o,) + largest[i + 1:]
+                overrides = space.overrides(genes)
+                if {k for k in overrides if overrides[k] != top.get(k)} <= {"fusion"}:
+                    continue  # a fusion option is an input of the supernet ('nas'), not a width
+                widths = block_widths(zoo.create(space.base, **overrides))
+                if set(widths) != set(self.full):
+                    raise ValueError(f"{space.name}: {choice.name}={choice.options[o]} changes which conv blocks exist "
+                                     "(a depth choice): masks cannot select it")
+                for p, w in widths.items():
+                    if w == self.full[p][0]:
+                        continue
+                    owner, table = self.control.setdefault(p, (i, {}))
+                    if owner != i:
+                        raise ValueError(f"{space.name}: conv block {'/'.join(p)} is set by both "
+                                         f"{space.choices[owner].name} and {choice.name}")
+                    table[o] = w
+
+    def widths(self, genes) -> dict[Path, int]:
+        out = {}
+        for p, (full, _) in self.full.items():
+            owner = self.control.get(p)
+            out[p] = owner[1].get(genes[owner[0]], full) if owner else full
+        return out
+
+    def masks(self, genes) -> dict[str, np.ndarray]:
+        """{'/'-joined path: (C,) float32 mask} of the subnet `genes` (as `masks` gives)."""
+        out = {}
+        for p, w in self.widths(tuple(genes)).items():
+            full, halved = self.full[p]
+            m = np.zeros(full, np.float32)
+            m[kept_channels(full, w, halved)] = 1.0
+            out["/".join(p)] = m
+        return out
 
 
 def supernet_of(space) -> "zoo.Detector":

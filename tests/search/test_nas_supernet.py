@@ -70,3 +70,32 @@ def test_one_compile_serves_every_subnet_and_idle_weights_get_no_gradient(supern
     kernel = np.asarray(g["backbone"]["layer3"]["conv"]["kernel"])  # block 3 at 1/4: 16 of 64 outputs kept
     assert np.abs(kernel[..., 16:]).max() == 0 and np.abs(kernel[..., :16]).max() > 0
     assert np.asarray(g["adapter"]["exchangers_0"]["fusion_weight"]) == 0  # option 1 chosen: option 3's weight idle
+
+
+def test_mask_table_and_spos_draws(supernet):
+    from search.nas.spos import SPOSStream, SubnetInputs
+
+    space, sup, _, _, _ = supernet
+    subnet_inputs = SubnetInputs(space, sup)
+    for seed in (5, 6):  # the look-up table gives exactly the traced masks
+        genes = space.sample(np.random.default_rng(seed))
+        exact = elastic.masks(sup, zoo.create(space.base, **space.overrides(genes)))
+        fast = subnet_inputs(genes)
+        assert fast["masks"].keys() == exact.keys()
+        assert all(np.array_equal(fast["masks"][k], np.asarray(exact[k])) for k in exact)
+        assert [int(e["fusion"]) for e in fast["nas"]["adapter"].values()] == list(space.overrides(genes)["fusion"])
+
+    class Batches:  # a stand-in stream: SPOSStream only adds the subnet to its batches
+        batch_size = 2
+
+        def batch(self, s):
+            return {"inputs": {"heat": np.full((1,), s)}, "targets": {}, "window": 0}
+
+    a, b = SPOSStream(Batches(), space, subnet_inputs, seed=0), SPOSStream(Batches(), space, subnet_inputs, seed=1)
+    draws = [a.genes(s) for s in range(6)]
+    assert draws == [a.genes(s) for s in range(6)] and len(set(draws)) == 6  # a pure function of (seed, step)
+    assert draws != [b.genes(s) for s in range(6)]
+    batch = a.batch(3)
+    assert batch["inputs"]["heat"][0] == 3 and batch["window"] == 0 and batch.keys() == {"inputs", "targets", "window"}
+    assert all(np.array_equal(batch["inputs"]["masks"][k], v) for k, v in subnet_inputs(a.genes(3))["masks"].items())
+    assert a.batch_size == 2

@@ -1,0 +1,175 @@
+"""SPOS on the elastic supernet: uniform single-path training, BN recalibration, subnet scores.
+
+- `SupernetDetector` is the supernet as the training loop sees a detector: its inputs carry the
+  subnet (`masks`, and `nas`: the Exchangers' fusion options), so train.loop's resumable loop,
+  checkpoints and compiled step serve it unchanged (one compile for every subnet).
+- `SPOSStream` draws batch s's subnet uniformly from `default_rng([seed, SALT, s])`: like the
+  batch itself, a pure function of (seed, s), so a resumed supernet run trains what an
+  uninterrupted one trains.
+- `SubnetScorer` scores subnets with the weights they inherit: the BN running statistics are
+  recalibrated (reset to the mean of the subnet's batch statistics over fixed unaugmented
+  training batches, as search.oneshot does for depth), then COCO mAP on validation maps through
+  the RD predictor with the subnet's masks as inputs (one compile for every subnet).
+- `subnet_costs`: params (BN-folded, the paper's convention) and GFLOPs (2 x MACs at the real
+  input size) of the stand-alone subnet, from shapes only: cheap enough to check constraints
+  before anything is scored.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from dsfec_jax import zoo
+from dsfec_jax.core.provenance import jsonable, versions
+from dsfec_jax.data.rd.augment import RDAugment
+from dsfec_jax.data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
+from dsfec_jax.data.rd.representations import RDRepresentation
+from dsfec_jax.evaluate_rd import evaluate_rd
+from dsfec_jax.layers.yolo import BN_MOMENTUM
+from dsfec_jax.predict_rd import RDPredictor
+from dsfec_jax.profile import counting
+from dsfec_jax.profile.rd import folded_params
+from dsfec_jax.train.loop import RunSpec, train
+from dsfec_jax.train.schedules import Schedule
+
+from .elastic import MaskTable, masked_apply, supernet_of
+from .space import Genes, SearchSpace
+
+SALT = 23  # separates the subnet draws from the batch order's random streams
+CALIBRATION_BATCHES = 16
+
+
+class SupernetDetector:
+    """The supernet with the subnet as an input: `apply(variables, {maps..., 'masks', 'nas'})`."""
+
+    def __init__(self, supernet):
+        self.supernet, self.config, self.module = supernet, supernet.config, supernet.module
+
+    @property
+    def name(self) -> str:
+        return f"{self.config.name}_supernet"
+
+    def init(self, rng) -> dict:
+        variables = self.supernet.init(rng)
+        return {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+
+    def apply(self, variables: dict, inputs: dict, train: bool = False):
+        inputs = dict(inputs)
+        nas, masks = inputs.pop("nas"), inputs.pop("masks")
+        return masked_apply(self.supernet, {**variables, "nas": nas}, inputs, masks, train)
+
+
+class SubnetInputs:
+    """genes -> the subnet's inputs {'masks', 'nas'} (look-ups: MaskTable)."""
+
+    def __init__(self, space: SearchSpace, supernet):
+        self.space, self.table = space, MaskTable(space, supernet)
+        self.nas = jax.eval_shape(lambda: supernet.init(jax.random.key(0))).get("nas", {})
+
+    def __call__(self, genes: Genes) -> dict:
+        fusions = self.space.overrides(genes).get("fusion")
+
+        def put(tree):
+            return {k: ({"fusion": np.int32(fusions[int(k.rsplit("_", 1)[1])])} if "fusion" in v else put(v))
+                    for k, v in tree.items()}
+
+        return {"masks": self.table.masks(genes), "nas": put(self.nas) if fusions is not None else {}}
+
+
+class SPOSStream:
+    """A batch stream whose batch s also carries a uniformly drawn subnet (a pure function of (seed, s))."""
+
+    def __init__(self, stream, space: SearchSpace, subnet_inputs: SubnetInputs, seed: int):
+        self.stream, self.space, self.subnet_inputs, self.seed = stream, space, subnet_inputs, int(seed)
+
+    def __getattr__(self, name):
+        return getattr(self.stream, name)
+
+    def genes(self, step: int) -> Genes:
+        return self.space.sample(np.random.default_rng([self.seed, SALT, step]))
+
+    def batch(self, step: int) -> dict:
+        batch = self.stream.batch(step)
+        return {**batch, "inputs": {**batch["inputs"], **self.subnet_inputs(self.genes(step))}}
+
+
+def train_supernet(space: SearchSpace, samples, schedule: Schedule, run_dir: str | Path, steps: int, seed: int = 0,
+                   progress: bool = True, stop_at: int | None = None):
+    """Train (or resume) the space's supernet by SPOS in run_dir -> (SupernetDetector, SubnetInputs, state)."""
+    supernet = supernet_of(space)
+    det, subnet_inputs = SupernetDetector(supernet), SubnetInputs(space, supernet)
+    cfg = supernet.config
+    stream = SPOSStream(RDBatchStream(samples, schedule.batch_size, seed, RDAugment(), RDRepresentation(), cfg.classes,
+                                      DEFAULT_MAX_BOXES), space, subnet_inputs, seed)
+    spec = RunSpec(Path(run_dir), schedule, seed, total_steps=steps, stop_at=stop_at, progress=progress)
+    info = {"space": space.name, "base": space.base, "strategy": "spos", "config": jsonable(dataclasses.asdict(cfg)),
+            "schedule": jsonable(dataclasses.asdict(schedule)), "seed": seed, "steps": steps,
+            "train_samples": len(samples), "versions": versions()}
+    state, _ = train(det, stream, spec, info)
+    return det, subnet_inputs, state
+
+
+class SubnetRDPredictor(RDPredictor):
+    """The RD predictor over the supernet, run as the subnet in `.subnet` (set between subnets)."""
+
+    subnet: dict = {}
+
+    def run(self, inputs: dict):
+        return super().run({**inputs, **self.subnet})
+
+
+def recalibrator(det: SupernetDetector):
+    """(variables, batches, subnet inputs) -> BN running statistics of that subnet = the mean of its
+    batch statistics over the batches (every YOLO BN has momentum BN_MOMENTUM)."""
+    batch_stats = jax.jit(lambda v, x: det.apply(v, x, train=True)[1]["batch_stats"])
+
+    def recalibrate(variables: dict, batches: Sequence[dict], subnet: dict) -> dict:
+        means = []
+        for inputs in batches:
+            new, old = batch_stats(variables, {**inputs, **subnet}), variables["batch_stats"]
+            # new = m * old + (1 - m) * batch  =>  batch = (new - m * old) / (1 - m)
+            means.append(jax.tree.map(lambda n, o: (n - BN_MOMENTUM * o) / (1 - BN_MOMENTUM), new, old))
+        return jax.tree.map(lambda *x: jnp.mean(jnp.stack(x), 0), *means)
+
+    return recalibrate
+
+
+class SubnetScorer:
+    """score(list of genes) -> [{'mAP50', 'mAP50_95', 'mAP30'}] with inherited, recalibrated weights."""
+
+    def __init__(self, det: SupernetDetector, subnet_inputs: SubnetInputs, state: dict, train_samples, val_samples,
+                 seed: int = 0, calibration_batches: int = CALIBRATION_BATCHES, batch_size: int = 16):
+        self.det, self.subnet_inputs, self.val = det, subnet_inputs, val_samples
+        self.params = state["params"]
+        stream = RDBatchStream(train_samples, batch_size, seed, None, RDRepresentation(), det.config.classes,
+                               DEFAULT_MAX_BOXES)
+        self.batches = [stream.batch(s)["inputs"] for s in range(min(calibration_batches, stream.per_epoch))]
+        self.recalibrate = recalibrator(det)
+        self.start_stats = state["batch_stats"]
+        self.predictor = SubnetRDPredictor(det, {"params": self.params, "batch_stats": self.start_stats})
+
+    def __call__(self, batch: list[Genes]) -> list[dict]:
+        out = []
+        for genes in batch:
+            subnet = self.subnet_inputs(genes)
+            stats = self.recalibrate({"params": self.params, "batch_stats": self.start_stats}, self.batches, subnet)
+            self.predictor.variables = {"params": self.params, "batch_stats": stats}
+            self.predictor.subnet = subnet
+            scores = evaluate_rd(self.predictor, self.val)[0]
+            out.append({k: float(scores[k]) for k in ("mAP50", "mAP50_95", "mAP30")})
+        return out
+
+
+def subnet_costs(space: SearchSpace, genes: Genes) -> dict:
+    """{'params' (BN-folded), 'params_trainable', 'gflops'} of the stand-alone subnet, from shapes."""
+    det = zoo.create(space.base, **space.overrides(genes))
+    shapes = jax.eval_shape(lambda: det.init(jax.random.key(0)))
+    trainable = int(sum(np.prod(x.shape) for x in jax.tree.leaves(shapes["params"])))
+    return {"params": folded_params(shapes["params"]), "params_trainable": trainable,
+            "gflops": float(counting.count_gflops(det)["total"])}
