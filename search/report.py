@@ -191,6 +191,13 @@ def plot(table: list[dict], cost: str, path: Path, title: str, score: tuple[str,
     ax.set_ylabel(f"{name} (%)")
     ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)
+    save_figure(fig, path)
+
+
+def save_figure(fig, path: Path) -> None:
+    """A matplotlib figure as a PNG, written atomically, then closed."""
+    import matplotlib.pyplot as plt
+
     fig.tight_layout()
     buf = io.BytesIO()
     fig.savefig(buf, format="png")

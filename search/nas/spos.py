@@ -168,7 +168,12 @@ class SubnetScorer:
 
 def subnet_costs(space: SearchSpace, genes: Genes) -> dict:
     """{'params' (BN-folded), 'params_trainable', 'gflops'} of the stand-alone subnet, from shapes."""
-    det = zoo.create(space.base, **space.overrides(genes))
+    return model_costs(space.base, space.overrides(genes))
+
+
+def model_costs(model: str, overrides: dict) -> dict:
+    """subnet_costs of any zoo model and config overrides."""
+    det = zoo.create(model, **overrides)
     shapes = jax.eval_shape(lambda: det.init(jax.random.key(0)))
     trainable = int(sum(np.prod(x.shape) for x in jax.tree.leaves(shapes["params"])))
     return {"params": folded_params(shapes["params"]), "params_trainable": trainable,

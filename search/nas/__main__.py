@@ -1,0 +1,44 @@
+"""One-shot NAS: python -m search.nas --space yolov8n_adapter [--profile smoke|quick|paper]
+    [--strategy evolution|nsga2] [--max-params 2.65e6] [--max-gflops G] [--objective params|gflops]
+    [--seed 0] [--run-dir runs/nas/SPACE]
+
+Trains the space's weight-sharing supernet by SPOS (resumable), searches it under the limits
+(the paper's evolution, or Optuna's NSGA-II), and writes RUN_DIR/report.md with the generation
+table, the top subnets and Pareto plots (pareto_params.png, pareto_gflops.png). Run the same
+command again to resume a killed run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+
+from .run import PROFILES, run_nas
+from .spaces import SPACES
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    p = argparse.ArgumentParser(prog="python -m search.nas", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--space", required=True, choices=sorted(SPACES))
+    p.add_argument("--profile", default="quick", choices=sorted(PROFILES))
+    p.add_argument("--strategy", default="evolution", choices=("evolution", "nsga2"))
+    p.add_argument("--max-params", type=float, default=None, help="limit on BN-folded parameters (the paper's subnet: 2.65e6)")
+    p.add_argument("--max-gflops", type=float, default=None, help="limit on GFLOPs (2 x MACs at 256 x 64)")
+    p.add_argument("--objective", default="params", choices=("params", "gflops"), help="NSGA-II's cost objective")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--run-dir", default=None)
+    p.add_argument("--no-progress", action="store_true")
+    args = p.parse_args(argv)
+    limits = {k: v for k, v in (("params", args.max_params), ("gflops", args.max_gflops)) if v is not None}
+    run_dir = args.run_dir or f"runs/nas/{args.space}_{args.profile}_{args.strategy}"
+    report = run_nas(args.space, run_dir, args.profile, args.strategy, limits, args.seed, args.objective,
+                     command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress)
+    print(f"report: {report}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,65 @@
+"""What a NAS run reports: the generation table, the top subnets, Pareto plots like the paper's
+Fig. 5 (accuracy against params and GFLOPs, every scored subnet, the front in red, the zoo's
+hand-designed models as reference points), written beside the journal with atomic writes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from dsfec_jax.core import atomic
+
+from ..report import pareto, save_figure
+
+COST_LABELS = {"params": "params (M, BN-folded)", "gflops": "GFLOPs (2 x MAC, batch 1)"}
+
+
+def top_table(records: list[dict], metric: str, k: int = 5) -> str:
+    best = sorted(records, key=lambda r: (-r[metric], r["key"]))[:k]
+    lines = [f"| rank | subnet | {metric} | params (M) | GFLOPs | choices |", "|---|---|---|---|---|---|"]
+    for i, r in enumerate(best, 1):
+        choices = ", ".join(f"{n}={v}" for n, v in r["choices"].items())
+        lines.append(f"| {i} | {r['key']} | {r[metric]:.2f} | {r['costs']['params'] / 1e6:.3f} | "
+                     f"{r['costs']['gflops']:.3f} | {choices} |")
+    return "\n".join(lines)
+
+
+def plot_pareto(records: list[dict], cost: str, metric: str, path: Path, title: str,
+                references: list[dict] = ()) -> None:
+    """Every scored subnet (blue), its Pareto front (red) and reference models (black squares:
+    {'label', cost, metric})."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scale = 1e-6 if cost == "params" else 1.0
+    pts = [(r["costs"][cost] * scale, r[metric]) for r in records]
+    fig, ax = plt.subplots(figsize=(6, 4.2), dpi=120)
+    if pts:
+        ax.scatter([c for c, _ in pts], [s for _, s in pts], s=10, color="tab:blue", alpha=0.5, label="subnets (inherited weights)")
+        front = sorted(pts[i] for i in pareto(pts))
+        ax.plot([c for c, _ in front], [s for _, s in front], color="tab:red", marker="o", ms=3, lw=1, label="Pareto front")
+    for ref in references:
+        if ref.get(metric) is None:
+            continue
+        ax.scatter(ref[cost] * scale, ref[metric], marker="s", color="black", zorder=4)
+        ax.annotate(ref["label"], (ref[cost] * scale, ref[metric]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ax.set_xlabel(COST_LABELS[cost])
+    ax.set_ylabel(f"{metric} (%)")
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    save_figure(fig, path)
+
+
+def write_report(run_dir: Path, header: str, progress: str, records: list[dict], metric: str,
+                 references: list[dict], meta: dict) -> Path:
+    for cost in ("params", "gflops"):
+        plot_pareto(records, cost, metric, run_dir / f"pareto_{cost}.png", f"{meta['space']}: {metric} vs {cost}",
+                    references)
+    text = "\n\n".join([header, "## Generations", progress, "## Top subnets (inherited weights)",
+                        top_table(records, metric), "Pareto plots: `pareto_params.png`, `pareto_gflops.png`.",
+                        "## Provenance", "```json\n" + json.dumps(meta, indent=1) + "\n```", ""])
+    path = run_dir / "report.md"
+    atomic.write_text(path, text)
+    return path
