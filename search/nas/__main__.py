@@ -1,6 +1,6 @@
 """One-shot NAS: python -m search.nas --space yolov8n_adapter [--profile smoke|quick|paper]
     [--strategy evolution|nsga2] [--max-params 2.65e6] [--max-gflops G] [--objective params|gflops]
-    [--seed 0] [--run-dir runs/nas/SPACE]
+    [--seed 0] [--run-dir runs/nas/SPACE] [--register yolov8n_adapter_search]
 
 Trains the space's weight-sharing supernet by SPOS (resumable), searches it under the limits
 (the paper's evolution, or Optuna's NSGA-II), and writes RUN_DIR/report.md with the generation
@@ -31,11 +31,14 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--run-dir", default=None)
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--register", default=None, metavar="NAME",
+                   help="register the best subnet as zoo model NAME (e.g. yolov8n_adapter_search: models/yolo_rd/searched.json)")
     args = p.parse_args(argv)
     limits = {k: v for k, v in (("params", args.max_params), ("gflops", args.max_gflops)) if v is not None}
     run_dir = args.run_dir or f"runs/nas/{args.space}_{args.profile}_{args.strategy}"
     report = run_nas(args.space, run_dir, args.profile, args.strategy, limits, args.seed, args.objective,
-                     command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress)
+                     command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress,
+                     register_as=args.register)
     print(f"report: {report}")
     return 0
 

@@ -21,6 +21,7 @@ from dsfec_jax.train.schedules import get_schedule
 
 from ..journal import Journal
 from .evolution import Evolution, EvolutionSettings, progress_table
+from .register import register
 from .report import write_report
 from .space import SearchSpace
 from .spaces import get_space
@@ -77,7 +78,7 @@ def shipped_reference(model: str) -> dict | None:
 
 def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strategy: str = "evolution",
             limits: dict | None = None, seed: int = 0, objective: str = "params", command: str = "",
-            progress: bool = True, log: Callable[[str], None] = print) -> Path:
+            progress: bool = True, register_as: str | None = None, log: Callable[[str], None] = print) -> Path:
     space = get_space(space_name)
     if space.name != "yolov8n_adapter":
         raise NotImplementedError(f"--space {space_name}: its supernet is not built yet (the engine's spaces, "
@@ -117,4 +118,13 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
               f"Synthetic RD benchmark, profile `{profile}`: {steps} SPOS steps, {len(records)} subnets scored with "
               f"inherited weights (BN recalibrated on {p.calibration_batches} batches) on {len(val)} val maps; limits "
               f"{limits or 'none'}. Inherited-weight mAP ranks subnets; it is not a stand-alone mAP.")
-    return write_report(run_dir, header, progress_text, records, metric, references, meta)
+    report = write_report(run_dir, header, progress_text, records, metric, references, meta)
+    if register_as:
+        best = min(records, key=lambda r: (-r[metric], r["key"]))
+        register(space, tuple(best["genes"]), register_as,
+                 {**{k: meta[k] for k in ("command", "profile", "strategy", "limits", "seed", "supernet_steps")},
+                  "inherited": {metric: best[metric]}, "costs": best["costs"], "report": str(report),
+                  "versions": meta["environment"].get("versions")})
+        log(f"registered {register_as}: subnet {best['key']} ({metric} {best[metric]:.2f} inherited, "
+            f"{best['costs']['params'] / 1e6:.3f} M params)")
+    return report

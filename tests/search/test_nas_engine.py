@@ -163,3 +163,17 @@ def test_nsga2_front_is_feasible_and_resumes(tmp_path):
     study = run_nsga2(toy_space(), more, toy_costs, tmp_path, generations=4, **kwargs)  # resume: one more generation
     assert sum(t.state.name == "COMPLETE" for t in study.trials) == 32
     assert not set(more.scored) & set(counter.scored)
+
+
+def test_a_registered_subnet_is_a_zoo_config(tmp_path):
+    from dsfec_jax.models.yolo_rd.variants import searched_variants
+    from search.nas.register import register
+
+    space, path = get_space("yolov8n_adapter"), tmp_path / "searched.json"
+    genes = space.sample(np.random.default_rng(4))
+    register(space, genes, "yolov8n_adapter_search", {"command": "python -m search.nas ...", "seed": 0}, path)
+    cfg = searched_variants(path)["yolov8n_adapter_search"]
+    assert cfg == zoo.config(space.base, name="yolov8n_adapter_search", notes=cfg.notes, **space.overrides(genes))
+    path.write_text('{"x": {"base": "yolov8n_adapter"}}')
+    with pytest.raises(ValueError, match="searched.json.*'overrides'"):
+        searched_variants(path)

@@ -9,8 +9,14 @@ representation ablation and Table 6's fusion ablation are configs of the same ne
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 
 from .config import YoloRDConfig
+
+# Subnets found by the one-shot search (`python -m search.nas ... --register`, search/nas/register.py):
+# {name: {"base": variant, "overrides": {field: value}, "provenance": {...}}}, registered below
+SEARCHED = Path(__file__).parent / "searched.json"
 
 ADAPTER_NOTE = ("Adapter widths are ours (the paper gives none): Stem 1->32->64->128 at stride 4, Exchangers "
                 "after backbone layers 2-8, modes 1,2,1,2,1,2,1, fusion option 1 (see config.py)")
@@ -26,6 +32,23 @@ VARIANTS: dict[str, YoloRDConfig] = {
     "yolov10n_adapter": YoloRDConfig(name="yolov10n_adapter", arch="v10", scale="n", adapter_input="gray",
                                      notes=ADAPTER_NOTE),
 }
+
+
+def searched_variants(path: Path = SEARCHED) -> dict[str, YoloRDConfig]:
+    """The searched subnets recorded in `path` as variants (none when it does not exist)."""
+    if not path.exists():
+        return {}
+    try:
+        entries = json.loads(path.read_text())
+        out = {}
+        for name, entry in entries.items():
+            overrides = {k: tuple(v) if isinstance(v, list) else v for k, v in entry["overrides"].items()}
+            note = f"searched subnet of {entry['base']}: {entry['provenance']['command']}"
+            out[name] = dataclasses.replace(VARIANTS[entry["base"]], name=name, notes=note, **overrides)
+        return out
+    except (ValueError, KeyError, TypeError) as err:
+        raise ValueError(f"{path}: expected {{name: {{'base': a yolo_rd variant, 'overrides': {{field: value}}, "
+                         f"'provenance': {{'command': ...}}}}}} ({type(err).__name__}: {err})") from err
 
 
 def representation_variant(backbone_input: str, adapter_input: str | None) -> YoloRDConfig:
@@ -44,3 +67,5 @@ def fusion_variant(option: int) -> YoloRDConfig:
 # Table 5's rows: (backbone input, adapter input); None = plain YOLOv8n
 TABLE5_ROWS = (("heat", None), ("gray", None), ("heat", "gray"), ("gray", "heat"), ("heat", "heat"), ("gray", "gray"))
 TABLE6_OPTIONS = (2, 3, 1)  # in the paper's row order
+
+VARIANTS.update(searched_variants())
