@@ -1,5 +1,6 @@
 """One-shot NAS: python -m search.nas --space yolov8n_adapter [--profile smoke|quick|paper]
-    [--strategy evolution|nsga2] [--max-params 2.65e6] [--max-gflops G] [--objective params|gflops]
+    [--strategy evolution|nsga2] [--max-params 2.65e6] [--max-gflops G] [--max-latency-ms MS]
+    [--latency-table FILE] [--objective params|gflops|latency_ms]
     [--seed 0] [--run-dir runs/nas/SPACE] [--register yolov8n_adapter_search]
 
 Trains the space's weight-sharing supernet by SPOS (resumable), searches it under the limits
@@ -27,18 +28,23 @@ def main(argv=None) -> int:
     p.add_argument("--strategy", default="evolution", choices=("evolution", "nsga2"))
     p.add_argument("--max-params", type=float, default=None, help="limit on BN-folded parameters (the paper's subnet: 2.65e6)")
     p.add_argument("--max-gflops", type=float, default=None, help="limit on GFLOPs (2 x MACs at 256 x 64)")
-    p.add_argument("--objective", default="params", choices=("params", "gflops"), help="NSGA-II's cost objective")
+    p.add_argument("--max-latency-ms", type=float, default=None,
+                   help="limit on the latency table's prediction (python -m search.nas.latency builds the table)")
+    p.add_argument("--latency-table", default=None, help="default search/nas/records/latency_SPACE.json")
+    p.add_argument("--objective", default="params", choices=("params", "gflops", "latency_ms"),
+                   help="NSGA-II's cost objective")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--run-dir", default=None)
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--register", default=None, metavar="NAME",
                    help="register the best subnet as zoo model NAME (e.g. yolov8n_adapter_search: models/yolo_rd/searched.json)")
     args = p.parse_args(argv)
-    limits = {k: v for k, v in (("params", args.max_params), ("gflops", args.max_gflops)) if v is not None}
+    limits = {k: v for k, v in (("params", args.max_params), ("gflops", args.max_gflops),
+                                ("latency_ms", args.max_latency_ms)) if v is not None}
     run_dir = args.run_dir or f"runs/nas/{args.space}_{args.profile}_{args.strategy}"
     report = run_nas(args.space, run_dir, args.profile, args.strategy, limits, args.seed, args.objective,
                      command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress,
-                     register_as=args.register)
+                     register_as=args.register, latency_path=args.latency_table)
     print(f"report: {report}")
     return 0
 

@@ -11,7 +11,8 @@ from dsfec_jax.core import atomic
 
 from ..report import pareto, save_figure
 
-COST_LABELS = {"params": "params (M, BN-folded)", "gflops": "GFLOPs (2 x MAC, batch 1)"}
+COST_LABELS = {"params": "params (M, BN-folded)", "gflops": "GFLOPs (2 x MAC, batch 1)",
+               "latency_ms": "latency (ms, the table's prediction)"}
 
 
 def top_table(records: list[dict], metric: str, k: int = 5) -> str:
@@ -40,7 +41,7 @@ def plot_pareto(records: list[dict], cost: str, metric: str, path: Path, title: 
         front = sorted(pts[i] for i in pareto(pts))
         ax.plot([c for c, _ in front], [s for _, s in front], color="tab:red", marker="o", ms=3, lw=1, label="Pareto front")
     for ref in references:
-        if ref.get(metric) is None:
+        if ref.get(metric) is None or ref.get(cost) is None:
             continue
         ax.scatter(ref[cost] * scale, ref[metric], marker="s", color="black", zorder=4)
         ax.annotate(ref["label"], (ref[cost] * scale, ref[metric]), fontsize=7, xytext=(3, 3), textcoords="offset points")
@@ -54,11 +55,12 @@ def plot_pareto(records: list[dict], cost: str, metric: str, path: Path, title: 
 
 def write_report(run_dir: Path, header: str, progress: str, records: list[dict], metric: str,
                  references: list[dict], meta: dict) -> Path:
-    for cost in ("params", "gflops"):
+    costs = [c for c in COST_LABELS if records and all(c in r["costs"] for r in records)]
+    for cost in costs:
         plot_pareto(records, cost, metric, run_dir / f"pareto_{cost}.png", f"{meta['space']}: {metric} vs {cost}",
                     references)
     text = "\n\n".join([header, "## Generations", progress, "## Top subnets (inherited weights)",
-                        top_table(records, metric), "Pareto plots: `pareto_params.png`, `pareto_gflops.png`.",
+                        top_table(records, metric), "Pareto plots: " + ", ".join(f"`pareto_{c}.png`" for c in costs) + ".",
                         "## Provenance", "```json\n" + json.dumps(meta, indent=1) + "\n```", ""])
     path = run_dir / "report.md"
     atomic.write_text(path, text)

@@ -21,6 +21,7 @@ from dsfec_jax.train.schedules import get_schedule
 
 from ..journal import Journal
 from .evolution import Evolution, EvolutionSettings, progress_table
+from .latency import RECORDS, LatencyTable
 from .register import register
 from .report import write_report
 from .space import SearchSpace
@@ -54,16 +55,32 @@ PROFILES = {
 
 
 class CachedCosts:
-    """subnet_costs, each subnet's computed once (the evolution asks again when it journals)."""
+    """subnet_costs (+ the latency table's prediction, `latency_ms`, given a table), each subnet's
+    computed once (the evolution asks again when it journals)."""
 
-    def __init__(self, space: SearchSpace):
-        self.space, self.cache = space, {}
+    def __init__(self, space: SearchSpace, latency: LatencyTable | None = None):
+        self.space, self.latency, self.cache = space, latency, {}
 
     def __call__(self, genes) -> dict:
         genes = tuple(genes)
         if genes not in self.cache:
-            self.cache[genes] = subnet_costs(self.space, genes)
+            costs = subnet_costs(self.space, genes)
+            if self.latency is not None:
+                costs["latency_ms"] = self.latency.predict(genes)
+            self.cache[genes] = costs
         return self.cache[genes]
+
+
+def latency_table(space: SearchSpace, path: str | Path | None, needed: bool) -> LatencyTable | None:
+    """The space's latency table (search/nas/records/latency_SPACE.json unless `path`), or None
+    when there is none and no limit needs it."""
+    path = Path(path) if path else RECORDS / f"latency_{space.name}.json"
+    if not path.exists():
+        if needed:
+            raise FileNotFoundError(f"--max-latency-ms needs a latency table: {path} does not exist; build it with "
+                                    f"python -m search.nas.latency --space {space.name} --threads 1")
+        return None
+    return LatencyTable.load(path, space)
 
 
 def shipped_reference(model: str) -> dict | None:
@@ -78,12 +95,14 @@ def shipped_reference(model: str) -> dict | None:
 
 def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strategy: str = "evolution",
             limits: dict | None = None, seed: int = 0, objective: str = "params", command: str = "",
-            progress: bool = True, register_as: str | None = None, log: Callable[[str], None] = print) -> Path:
+            progress: bool = True, register_as: str | None = None, latency_path: str | None = None,
+            log: Callable[[str], None] = print) -> Path:
     space = get_space(space_name)
     if space.name != "yolov8n_adapter":
         raise NotImplementedError(f"--space {space_name}: its supernet is not built yet (the engine's spaces, "
                                   "evolution and NSGA-II take it; only yolov8n_adapter has a supernet so far)")
     p, run_dir, limits = PROFILES[profile], Path(run_dir), dict(limits or {})
+    table = latency_table(space, latency_path, "latency_ms" in limits)  # before anything trains
     t0 = time.perf_counter()
     train = load_rd_samples("synthetic", "train", p.train_samples)
     val = load_rd_samples("synthetic", "val", p.val_samples)
@@ -93,7 +112,7 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
     t_supernet = time.perf_counter() - t0
     log(f"supernet: {steps} SPOS steps ({t_supernet:.0f} s including any earlier part of this run)")
     scorer = SubnetScorer(det, subnet_inputs, state, train, val, seed, p.calibration_batches, p.batch_size)
-    costs = CachedCosts(space)
+    costs = CachedCosts(space, table)
     metric = "mAP50"
     if strategy == "evolution":
         settings = EvolutionSettings(p.population, p.generations, p.top_k, metric=metric, seed=seed)

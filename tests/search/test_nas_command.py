@@ -35,3 +35,10 @@ def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
 def test_nas_command_refuses_a_space_without_a_supernet(tmp_path):
     with pytest.raises(NotImplementedError, match="dsfec.*supernet is not built"):
         main(["--space", "dsfec", "--profile", "smoke", "--run-dir", str(tmp_path)])
+
+
+def test_a_latency_limit_without_a_table_fails_before_training(tmp_path):
+    with pytest.raises(FileNotFoundError, match="python -m search.nas.latency --space yolov8n_adapter"):
+        main(["--space", "yolov8n_adapter", "--profile", "smoke", "--max-latency-ms", "10",
+              "--latency-table", str(tmp_path / "none.json"), "--run-dir", str(tmp_path / "run")])
+    assert not (tmp_path / "run").exists()

@@ -177,3 +177,23 @@ def test_a_registered_subnet_is_a_zoo_config(tmp_path):
     path.write_text('{"x": {"base": "yolov8n_adapter"}}')
     with pytest.raises(ValueError, match="searched.json.*'overrides'"):
         searched_variants(path)
+
+
+def test_latency_table_adds_block_changes_and_reports_its_error(tmp_path):
+    from search.nas.latency import LatencyTable, build, check, one_at_a_time
+
+    space = toy_space()
+    weights = [np.linspace(0, 3, len(c.options)) for c in space.choices]
+    additive = lambda subnets: [5.0 + sum(w[g] for w, g in zip(weights, s)) for s in subnets]  # noqa: E731
+    assert len(one_at_a_time(space)) == 1 + sum(len(c.options) - 1 for c in space.choices)
+    table = build(space, additive)
+    genes = space.sample(np.random.default_rng(0))
+    assert table.predict(genes) == pytest.approx(additive([genes])[0])  # exact on an additive latency
+    assert check(table, space, additive, count=5)["max_abs_error_pct"] < 1e-9
+    interacting = lambda subnets: [5.0 + 0.5 * s[0] * s[1] + s[3] for s in subnets]  # noqa: E731
+    report = check(build(space, interacting), space, interacting, count=8)
+    assert report["max_abs_error_pct"] > 1 and len(report["rows"]) >= 5  # the interaction shows as error
+    table.save(tmp_path / "t.json")
+    assert LatencyTable.load(tmp_path / "t.json", space).predict(genes) == table.predict(genes)
+    with pytest.raises(ValueError, match="not of 'yolov8n_adapter'"):
+        LatencyTable.load(tmp_path / "t.json", get_space("yolov8n_adapter"))

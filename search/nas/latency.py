@@ -1,0 +1,142 @@
+"""A latency look-up table for a search space, built with the project's own profiler, and its error.
+
+The table holds the whole network's latency at the largest subnet and, for every choice block and
+option, how much the latency changes when that block alone takes that option (one-factor-at-a-
+time: 1 + sum(options - 1) whole-network measurements, 44 for Table 1, interleaved in one run so
+they share the box's state). A subnet's predicted latency is the largest's plus its blocks'
+changes. It ignores how blocks interact (a narrower block also makes the next block's input
+narrower), so `check` measures sampled subnets whole and reports the prediction's error; the
+search then filters on a prediction whose error is stated, as the latency-constrained NAS tools
+do (OFA, FBNet: per-op tables summed).
+
+Measurements: jitted JAX (`profile.latency`: stand-in weights of the subnet's shapes, batch 1,
+the medians of interleaved repeats), on the threads the process is pinned to:
+
+    python -m search.nas.latency --space yolov8n_adapter [--threads 1] [--check 8] [--out FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import shlex
+import sys
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from dsfec_jax import zoo
+from dsfec_jax.core import atomic
+from dsfec_jax.core.environment import environment
+
+from .space import Genes, SearchSpace, key
+from .spaces import get_space
+
+Measure = Callable[[list[Genes]], list[float]]  # subnets -> whole-network latency (ms), one interleaved run
+RECORDS = Path(__file__).parent / "records"
+
+
+@dataclasses.dataclass
+class LatencyTable:
+    space: str
+    base_ms: float  # the largest subnet's latency
+    deltas: list[list[float]]  # deltas[block][option]: the change when that block alone takes that option
+    setup: dict = dataclasses.field(default_factory=dict)  # command, threads, runtime, environment
+
+    def predict(self, genes: Sequence[int]) -> float:
+        return self.base_ms + sum(self.deltas[i][int(g)] for i, g in enumerate(genes))
+
+    def save(self, path: str | Path) -> None:
+        atomic.write_text(path, json.dumps(dataclasses.asdict(self), indent=1) + "\n")
+
+    @classmethod
+    def load(cls, path: str | Path, space: SearchSpace) -> "LatencyTable":
+        try:
+            table = cls(**json.loads(Path(path).read_text()))
+        except (OSError, ValueError, TypeError) as err:
+            raise ValueError(f"{path}: not a latency table ({err}); build one with "
+                             f"python -m search.nas.latency --space {space.name}") from err
+        if table.space != space.name or [len(d) for d in table.deltas] != [len(c.options) for c in space.choices]:
+            raise ValueError(f"{path}: a table of space {table.space!r} with {len(table.deltas)} blocks, not of "
+                             f"{space.name!r}; build one with python -m search.nas.latency --space {space.name}")
+        return table
+
+
+def one_at_a_time(space: SearchSpace) -> list[Genes]:
+    """The largest subnet, then each block at each of its other options, the rest largest."""
+    top = space.largest()
+    out = [top]
+    for i, c in enumerate(space.choices):
+        out += [top[:i] + (o,) + top[i + 1:] for o in range(len(c.options)) if o != top[i]]
+    return out
+
+
+def build(space: SearchSpace, measure: Measure, setup: dict | None = None) -> LatencyTable:
+    subnets = one_at_a_time(space)
+    ms = dict(zip(subnets, measure(subnets)))
+    top = space.largest()
+    deltas = [[ms[top[:i] + (o,) + top[i + 1:]] - ms[top] for o in range(len(c.options))]
+              for i, c in enumerate(space.choices)]
+    return LatencyTable(space.name, ms[top], deltas, setup or {})
+
+
+def check(table: LatencyTable, space: SearchSpace, measure: Measure, count: int = 8, seed: int = 0) -> dict:
+    """Measure `count` sampled subnets whole against the table: per-subnet rows and the error."""
+    rng = np.random.default_rng(seed)
+    subnets = list(dict.fromkeys(space.sample(rng) for _ in range(count)))
+    measured = measure(subnets)
+    rows = [{"subnet": key(g), "measured_ms": m, "predicted_ms": table.predict(g)} for g, m in zip(subnets, measured)]
+    errors = np.array([100 * (r["predicted_ms"] - r["measured_ms"]) / r["measured_ms"] for r in rows])
+    return {"rows": rows, "mean_abs_error_pct": float(np.mean(np.abs(errors))),
+            "max_abs_error_pct": float(np.max(np.abs(errors))), "mean_error_pct": float(np.mean(errors))}
+
+
+def jax_measure(space: SearchSpace, repeats: int = 10, warmup: int = 2) -> Measure:
+    """Whole-network latency of stand-alone subnets with jitted JAX (profile.latency), interleaved."""
+    from dsfec_jax.profile.latency import stage_functions, time_interleaved, timing_variables
+
+    def measure(subnets: list[Genes]) -> list[float]:
+        suites = {}
+        for genes in subnets:
+            det = zoo.create(space.base, **space.overrides(genes))
+            suites[key(genes)] = stage_functions(det, timing_variables(det), det.dummy_inputs(1), per_stage=False)
+        times = time_interleaved(suites, repeats, warmup)
+        return [times[key(g)]["total"]["median_ms"] for g in subnets]
+
+    return measure
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    p = argparse.ArgumentParser(prog="python -m search.nas.latency", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--space", required=True)
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--repeats", type=int, default=10)
+    p.add_argument("--check", type=int, default=8, help="sampled subnets measured whole to report the error")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default=None, help="default search/nas/records/latency_SPACE.json")
+    args = p.parse_args(argv)
+    from dsfec_jax.core import threads
+
+    threads.check(args.threads)
+    threads.pin(args.threads)
+    space = get_space(args.space)
+    measure = jax_measure(space, args.repeats)
+    setup = {"command": shlex.join(["python", "-m", "search.nas.latency", *argv]), "runtime": "jax",
+             "threads": args.threads, "repeats": args.repeats, "environment": environment()}
+    table = build(space, measure, setup)
+    table.setup["check"] = check(table, space, measure, args.check, args.seed)
+    out = Path(args.out) if args.out else RECORDS / f"latency_{space.name}.json"
+    table.save(out)
+    c = table.setup["check"]
+    print(f"{space.name}: largest {table.base_ms:.2f} ms; on {len(c['rows'])} sampled subnets the table's error is "
+          f"{c['mean_abs_error_pct']:.1f} % mean absolute, {c['max_abs_error_pct']:.1f} % max, "
+          f"{c['mean_error_pct']:+.1f} % mean; table: {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
