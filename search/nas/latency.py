@@ -1,10 +1,11 @@
 """A latency look-up table for a search space, built with the project's own profiler, and its error.
 
-The table holds the whole network's latency at the largest subnet and, for every choice block and
-option, how much the latency changes when that block alone takes that option (one-factor-at-a-
-time: 1 + sum(options - 1) whole-network measurements, 44 for Table 1, interleaved in one run so
-they share the box's state). A subnet's predicted latency is the largest's plus its blocks'
-changes. It ignores how blocks interact (a narrower block also makes the next block's input
+The table holds a base latency and, for every choice block and option, how much the latency
+changes when that block takes that option. They come from whole-network measurements, interleaved
+in one run so they share the box's state: the largest subnet and each block alone at each other
+option (one-factor-at-a-time: 1 + sum(options - 1), 44 for Table 1), plus `--fit` random subnets,
+the entries then being the least-squares fit to all of them. A subnet's predicted latency is the
+base plus its blocks' changes. It ignores how blocks interact (a narrower block also makes the next block's input
 narrower), so `check` measures sampled subnets whole and reports the prediction's error; the
 search then filters on a prediction whose error is stated, as the latency-constrained NAS tools
 do (OFA, FBNet: per-op tables summed).
@@ -12,7 +13,7 @@ do (OFA, FBNet: per-op tables summed).
 Measurements: jitted JAX (`profile.latency`: stand-in weights of the subnet's shapes, batch 1,
 the medians of interleaved repeats), on the threads the process is pinned to:
 
-    python -m search.nas.latency --space yolov8n_adapter [--threads 1] [--check 8] [--out FILE]
+    python -m search.nas.latency --space yolov8n_adapter [--threads 1] [--fit 48] [--check 8] [--out FILE]
 """
 
 from __future__ import annotations
@@ -73,13 +74,32 @@ def one_at_a_time(space: SearchSpace) -> list[Genes]:
     return out
 
 
-def build(space: SearchSpace, measure: Measure, setup: dict | None = None) -> LatencyTable:
+def build(space: SearchSpace, measure: Measure, setup: dict | None = None, fit: int = 0, seed: int = 0) -> LatencyTable:
+    """The one-factor-at-a-time table; with `fit` > 0, `fit` random subnets are measured in the same
+    run and the entries are the least-squares fit to all measurements (the largest option of each
+    block fixed at 0): a CPU network's fixed cost (dispatch, memory) does not shrink with its
+    widths, so the one-at-a-time changes, summed, overstate what several narrower blocks save."""
     subnets = one_at_a_time(space)
+    rng = np.random.default_rng([seed, 1])
+    subnets += [s for s in dict.fromkeys(space.sample(rng) for _ in range(fit)) if s not in subnets]
     ms = dict(zip(subnets, measure(subnets)))
     top = space.largest()
-    deltas = [[ms[top[:i] + (o,) + top[i + 1:]] - ms[top] for o in range(len(c.options))]
-              for i, c in enumerate(space.choices)]
-    return LatencyTable(space.name, ms[top], deltas, setup or {})
+    if not fit:
+        deltas = [[ms[top[:i] + (o,) + top[i + 1:]] - ms[top] for o in range(len(c.options))]
+                  for i, c in enumerate(space.choices)]
+        return LatencyTable(space.name, ms[top], deltas, setup or {})
+    return _fitted(space, ms, setup or {})
+
+
+def _fitted(space: SearchSpace, ms: dict, setup: dict) -> LatencyTable:
+    """base + deltas by least squares over every measured subnet (one-hot design, largest options as reference)."""
+    columns = [(i, o) for i, c in enumerate(space.choices) for o in range(len(c.options) - 1)]
+    design = np.array([[1.0] + [float(s[i] == o) for i, o in columns] for s in ms])
+    solution = np.linalg.lstsq(design, np.array(list(ms.values())), rcond=None)[0]
+    deltas = [[0.0] * len(c.options) for c in space.choices]
+    for (i, o), value in zip(columns, solution[1:]):
+        deltas[i][o] = float(value)
+    return LatencyTable(space.name, float(solution[0]), deltas, {**setup, "fitted_on": len(ms)})
 
 
 def check(table: LatencyTable, space: SearchSpace, measure: Measure, count: int = 8, seed: int = 0) -> dict:
@@ -116,6 +136,8 @@ def main(argv=None) -> int:
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--repeats", type=int, default=10)
     p.add_argument("--check", type=int, default=8, help="sampled subnets measured whole to report the error")
+    p.add_argument("--fit", type=int, default=48, help="random subnets measured too; the entries are then "
+                   "the least-squares fit to every measurement (0: the plain one-at-a-time table)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default=None, help="default search/nas/records/latency_SPACE.json")
     args = p.parse_args(argv)
@@ -127,8 +149,8 @@ def main(argv=None) -> int:
     measure = jax_measure(space, args.repeats)
     setup = {"command": shlex.join(["python", "-m", "search.nas.latency", *argv]), "runtime": "jax",
              "threads": args.threads, "repeats": args.repeats, "environment": environment()}
-    table = build(space, measure, setup)
-    table.setup["check"] = check(table, space, measure, args.check, args.seed)
+    table = build(space, measure, setup, args.fit, args.seed)
+    table.setup["check"] = check(table, space, measure, args.check, args.seed + 1000)  # other subnets than the fit's
     out = Path(args.out) if args.out else RECORDS / f"latency_{space.name}.json"
     table.save(out)
     c = table.setup["check"]

@@ -197,3 +197,14 @@ def test_latency_table_adds_block_changes_and_reports_its_error(tmp_path):
     assert LatencyTable.load(tmp_path / "t.json", space).predict(genes) == table.predict(genes)
     with pytest.raises(ValueError, match="not of 'yolov8n_adapter'"):
         LatencyTable.load(tmp_path / "t.json", get_space("yolov8n_adapter"))
+
+
+def test_a_fitted_latency_table_absorbs_a_fixed_cost():
+    from search.nas.latency import build, check
+
+    space = toy_space()
+    # a fixed cost the widths cannot remove: latency = max(floor, additive)
+    floored = lambda subnets: [max(6.0, 2.0 + 1.5 * s[0] + s[3] + s[4]) for s in subnets]  # noqa: E731
+    plain = check(build(space, floored), space, floored, count=12, seed=5)
+    fitted = check(build(space, floored, fit=60), space, floored, count=12, seed=5)
+    assert fitted["mean_abs_error_pct"] < plain["mean_abs_error_pct"]
