@@ -67,6 +67,8 @@ def evaluate(predictor: Predictor, frames: Sequence[Frame], classes=nuscenes.DSF
 
 
 # VoD's IoU thresholds under the project's canonical class names (VoD's Cyclist is "bicycle").
+ALL_CLASSES = "*"  # among match_classes: every class of the predictor
+
 VOD_IOU = {"car": 0.5, "pedestrian": 0.25, "bicycle": 0.25}
 TJ4D_IOU = {**VOD_IOU, "truck": 0.5}
 
@@ -169,7 +171,9 @@ def _report_vod(frames, detections, predictor) -> tuple[dict, str]:
 
 def _validate_rd_coco(predictor, samples, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
     from .evaluate_rd import evaluate_rd
-    return evaluate_rd(predictor, samples)[0], {}
+    scores = evaluate_rd(predictor, samples, [c for c in predictor.classes if c in match_classes or
+                                              ALL_CLASSES in match_classes])[0]
+    return scores, scores.pop("match_tables", {})
 
 
 def _report_rd_coco(samples, detections, predictor) -> tuple[dict, str]:
@@ -193,7 +197,8 @@ def _protocol(name: str):
 
 def validate(protocol: str, predictor, frames: Sequence[Frame], match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
     """Predict and score `frames` under `protocol` -> (headline and per-class scores, match tables
-    of `match_classes` for bootstrap intervals; {} where the protocol keeps none)."""
+    of `match_classes` for bootstrap intervals; {} where the protocol keeps none). ALL_CLASSES
+    ("*") among `match_classes` asks for every class of the predictor (the RD protocol)."""
     return _protocol(protocol)[0](predictor, frames, match_classes)
 
 

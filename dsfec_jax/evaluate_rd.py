@@ -22,12 +22,14 @@ def _percent(value: float) -> float | None:
     return None if value is None or math.isnan(value) else round(100.0 * float(value), 4)
 
 
-def score_rd(gts: Mapping[str, Boxes2D], dets: Mapping[str, Boxes2D], classes: Sequence[str]) -> dict:
+def score_rd(gts: Mapping[str, Boxes2D], dets: Mapping[str, Boxes2D], classes: Sequence[str],
+             match_classes: Sequence[str] = ()) -> dict:
     """COCO and DAROD figures of detections against ground truth (sample id -> Boxes2D, every
-    scored sample, empty ones included); ValueError for no samples."""
+    scored sample, empty ones included); ValueError for no samples. `match_classes` adds
+    "match_tables": {class: MatchTable (kind "coco")} for bootstrap intervals over the samples."""
     if not gts:
         raise ValueError("no samples to score: the ground truth mapping is empty (an empty split?)")
-    coco = coco_evaluate(gts, {k: dets[k] for k in gts}, tuple(classes))
+    coco = coco_evaluate(gts, {k: dets[k] for k in gts}, tuple(classes), match_classes=tuple(match_classes))
     darod = darod_evaluate(gts, {k: dets[k] for k in gts}, tuple(classes))
     per_class = {n: _percent(v) for n, v in coco.per_class_ap.items()}
     per_class50 = {n: _percent(v) for n, v in coco.per_class_ap50.items()}
@@ -36,17 +38,19 @@ def score_rd(gts: Mapping[str, Boxes2D], dets: Mapping[str, Boxes2D], classes: S
             "AP": {n: v for n, v in per_class.items() if v is not None},
             "AP50": {n: v for n, v in per_class50.items() if v is not None},
             **{f"darod_mAP{round(100 * t)}": _percent(darod.map_at(t)) for t in darod.iou_thresholds},
-            "num_gt": {n: int(k) for n, k in zip(darod.classes, darod.n_gt)}, "samples": len(gts)}
+            "num_gt": {n: int(k) for n, k in zip(darod.classes, darod.n_gt)}, "samples": len(gts),
+            **({"match_tables": coco.match_tables} if match_classes else {})}
 
 
 def ground_truth(samples: Sequence[RDSample]) -> dict[str, Boxes2D]:
     return {s.sample_id: s.boxes for s in (samples[i] for i in range(len(samples)))}
 
 
-def evaluate_rd(predictor, samples: Sequence[RDSample]) -> tuple[dict, dict[str, Boxes2D]]:
-    """Predict `samples` and score them -> (scores, detections)."""
+def evaluate_rd(predictor, samples: Sequence[RDSample], match_classes: Sequence[str] = ()
+                ) -> tuple[dict, dict[str, Boxes2D]]:
+    """Predict `samples` and score them -> (scores, detections); see score_rd for `match_classes`."""
     detections = predictor.predict_samples(samples)
-    return score_rd(ground_truth(samples), detections, predictor.classes), detections
+    return score_rd(ground_truth(samples), detections, predictor.classes, match_classes), detections
 
 
 def summary(scores: dict) -> str:

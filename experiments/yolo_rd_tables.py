@@ -9,16 +9,21 @@ options 1/2/3. Every row is a config of one network family, written as overrides
 trained and measured by one search trial (search/trial.py: fit with the family's recipe, COCO AP
 through pycocotools, profile). All four tables share one journal (default
 runs/experiments/yolo_rd): a row that two tables hold (YOLOv8n is in all four) trains once, and a
-killed run resumes where it stopped. With --seeds N each row trains N times; the table then gives
-mean ± sd over seeds and says whether each row's difference from the table's first row exceeds
-twice the pooled seed sd (the run-to-run noise of this budget). The paper's numbers are RADDet's
-(real data); ours are the synthetic benchmark's, so only orderings and gaps compare.
+killed run resumes where it stopped.
+
+How much of a difference is noise: every trial keeps its per-sample COCO matches, so the table's
+headline column gets a paired bootstrap over the validation samples (search.significance, the
+search reports' own): each row's difference from the first row with its 95 % interval, "above
+noise" where the interval excludes 0. With --seeds N each row trains N times, the table gives
+mean ± sd over seeds, and the bootstrap draws seeds too, so training noise widens the intervals. A
+journal from before the matches were kept gains them without training: `python -m search.rescore
+RUN_DIR`. The paper's numbers are RADDet's (real data); ours are the synthetic benchmark's, so only
+orderings and gaps compare.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 import statistics
 import sys
 from pathlib import Path
@@ -27,8 +32,11 @@ from dsfec_jax.core import atomic
 from dsfec_jax.models.yolo_rd import paper
 from dsfec_jax.models.yolo_rd.variants import (TABLE5_ROWS, TABLE6_OPTIONS, VARIANTS, fusion_variant,
                                                representation_variant)
+from dsfec_jax.metrics.boxes2d.coco import COCO_IOU_THRESHOLDS
 from search.cli import parse, parser, run_search
 from search.journal import Journal
+from search.significance import Statistic, paired_bootstrap
+from search.significance import summary as significance_note
 
 BASE = "yolov8n"
 UNCOMPARED = ("name", "notes")  # config fields that do not change the network or its training
@@ -69,7 +77,12 @@ def table_rows(table: str) -> list[tuple[str, object, dict]]:
     raise SystemExit(f"unknown table {table!r}; expected table3, table4, table5 or table6")
 
 
-COLUMNS = {  # table -> (record key, title); each printed as "ours (paper)"
+STATISTICS = {  # a headline column -> the bootstrap's statistic over every class's match table
+    "mAP50": Statistic("mAP@50", None, (0.5,)),
+    "mAP50_95": Statistic("mAP@50-95", None, tuple(float(t) for t in COCO_IOU_THRESHOLDS)),
+}
+
+COLUMNS = {  # table -> (record key, title); each printed as "ours (paper)"; the last is the headline
     "table3": (("params", "Params (M)"), ("mAP50", "mAP@50"), ("mAP50_95", "mAP@50-95")),
     "table4": (("params", "Params (M)"), ("mAP50", "mAP@50"), ("mAP50_95", "mAP@50-95")),
     "table5": (("mAP50_95", "mAP@50-95"),),
@@ -90,20 +103,43 @@ def _stats(records: list[dict], key: str) -> tuple[float | None, float, int]:
     return statistics.fmean(vals), statistics.stdev(vals) if len(vals) > 1 else 0.0, len(vals)
 
 
+def _bootstrap(table: str, rows: list, found: list[list[dict]]) -> dict | None:
+    """The paired bootstrap of the headline over the rows that have match tables (None without)."""
+    relabelled = [{**r, "label": label} for (label, _, _), recs in zip(rows, found) for r in recs]
+    if not found or not found[0] or not relabelled:
+        return None
+    try:
+        return paired_bootstrap(relabelled, rows[0][0], statistic=STATISTICS[COLUMNS[table][-1][0]])
+    except ValueError as err:  # rows scored on other frames: the table stands without intervals
+        print(f"no bootstrap intervals: {err}", file=sys.stderr)
+        return None
+
+
+def _delta(label: str, mean, first, sig: dict | None) -> str:
+    if mean is None or first is None:
+        return "-"
+    d = (sig or {}).get("delta", {}).get(label)
+    if d is None:
+        return f"{mean - first:+.1f}"
+    lo, hi = d["ci95"]
+    return f"{mean - first:+.1f} [{lo:+.1f}, {hi:+.1f}]" + (" above noise" if lo > 0 or hi < 0 else " within noise")
+
+
 def markdown(table: str, records: list[dict]) -> str:
     """The table: per row ours (mean ± sd over seeds) beside the paper's, and the headline's change
-    from the first row against the run-to-run noise (2 x the pooled seed sd)."""
+    from the first row with its 95 % paired-bootstrap interval over validation samples (and seeds)."""
     rows = table_rows(table)
     by_key = {}
     for r in records:
         by_key.setdefault(_row_key(r["overrides"]), []).append(r)
     headline = COLUMNS[table][-1][0]
-    found = [by_key.get(_row_key(overrides_of(cfg)), []) for _, cfg, _ in rows]
-    sds = [_stats(recs, headline)[1] for recs in found if _stats(recs, headline)[2] > 1]
-    noise = 2 * math.sqrt(statistics.fmean([s * s for s in sds])) if sds else None
+    found = [[r for r in by_key.get(_row_key(overrides_of(cfg)), []) if r["status"] == "ok"] for _, cfg, _ in rows]
+    sig = _bootstrap(table, rows, found)
     first = _stats(found[0], headline)[0] if found else None
     extra = [k for k in ("backbone", "adapter", "fusion") if k in rows[0][2]]
-    head = ["row"] + extra + [f"{t} ours (paper)" for _, t in COLUMNS[table]] + ["seeds", f"Δ {headline} vs row 1"]
+    interval = " [95 % CI]" if sig is not None and "delta" in sig else ""
+    head = ["row"] + extra + [f"{t} ours (paper)" for _, t in COLUMNS[table]] + ["seeds",
+                                                                                f"Δ {headline} vs row 1{interval}"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for (label, _, ref), recs in zip(rows, found):
         cells = [label] + [str(ref[k]) for k in extra]
@@ -112,14 +148,13 @@ def markdown(table: str, records: list[dict]) -> str:
             ours = "-" if mean is None else f"{mean:.{3 if key == 'params' else 1}f}" + (f" ± {sd:.1f}" if n > 1 else "")
             cells.append(f"{ours} ({ref.get(key, '-')})")
         mean, _, n = _stats(recs, headline)
-        cells.append(str(n))
-        delta = "-" if mean is None or first is None else f"{mean - first:+.1f}"
-        if noise is not None and mean is not None and first is not None:
-            delta += " (above noise)" if abs(mean - first) > noise else " (within noise)"
-        cells.append(delta)
+        cells += [str(n), _delta(label, mean, first, sig)]
         lines.append("| " + " | ".join(cells) + " |")
-    note = (f"Noise: 2 x pooled seed sd of {headline} = {noise:.2f} points." if noise is not None
-            else "One seed per row: no noise estimate (pass --seeds 2 or more).")
+    if sig is not None:
+        note = significance_note(sig)
+    else:
+        note = ("No intervals: the rows' records keep no match tables (a journal from before they were kept: "
+                "`python -m search.rescore RUN_DIR` adds them without training).")
     return "\n".join(lines) + "\n\n" + note + "\n"
 
 

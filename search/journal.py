@@ -33,5 +33,16 @@ class Journal:
         return {r["key"] for r in self.records() if not retry_failed or r["status"] == "ok"}
 
     def append(self, record: dict) -> None:
-        records = [r for r in self.records() if r["key"] != record["key"]] + [record]
+        self._write([r for r in self.records() if r["key"] != record["key"]] + [record])
+
+    def update(self, record: dict) -> None:
+        """Replace the record of record["key"] in place (its position kept); KeyError if it has none."""
+        records = self.records()
+        at = next((i for i, r in enumerate(records) if r["key"] == record["key"]), None)
+        if at is None:
+            raise KeyError(f"{self.path}: no record with key {record['key']!r} to update")
+        records[at] = record
+        self._write(records)
+
+    def _write(self, records: list[dict]) -> None:
         atomic.write_text(self.path, "".join(json.dumps(r) + "\n" for r in records))

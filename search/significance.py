@@ -1,26 +1,70 @@
 """How sure a search table is of its ranking: a paired bootstrap over the validation frames.
 
-Every candidate of a sweep is scored on the same validation frames, and each trial record keeps its
-Car match table (`dsfec_jax.metrics.resampling`): which predictions hit at each threshold, per frame.
-Drawing the frames with replacement and re-scoring every candidate on the same draw gives the spread
-that a finite evaluation set alone puts into the table; pairing (each draw scores every candidate)
-removes the frames' shared difficulty from the differences against the base row. With several seeds
-the draw also picks seeds with replacement (the same seed indices for every candidate, since a
-one-shot seed is one supernet shared by all of them) and a candidate's value is the mean over the
-drawn seeds, so training noise widens the intervals too; with one seed it cannot, and the summary
-says so.
+Every candidate of a sweep is scored on the same validation frames, and each trial record keeps the
+match tables of its protocol's classes (`dsfec_jax.metrics.resampling`): which predictions hit at
+each threshold, per frame (DSFEC: Car at the four centre distances; the RD tables: every class at
+COCO's IoU thresholds). Drawing the frames with replacement and re-scoring every candidate on the
+same draw gives the spread that a finite evaluation set alone puts into the table; pairing (each
+draw scores every candidate) removes the frames' shared difficulty from the differences against the
+base row. The resampled figure is the protocol's `Statistic`: the mean over its classes (those with
+ground truth in the draw) of each class's AP averaged over its thresholds, so Car mAP for DSFEC and
+mAP@50 for the RD tables, the tables' own headline. With several seeds the draw also picks seeds
+with replacement (the same seed indices for every candidate, since a one-shot seed is one supernet
+shared by all of them) and a candidate's value is the mean over the drawn seeds, so training noise
+widens the intervals too; with one seed it cannot, and the summary says so.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
-from dsfec_jax.metrics.resampling import MatchTable, bootstrap_counts, resampled_ap
+from dsfec_jax.metrics.resampling import MatchTable, bootstrap_counts, table_ap
 
 from .ranking import kendall_tau
 
-CLASS = "car"          # the class of the DSFEC tables' headline (Car mAP over 0.5/1/2/4 m)
 RESAMPLES = 1000
+
+
+@dataclasses.dataclass(frozen=True)
+class Statistic:
+    """The resampled figure: `name` as reports write it; `classes` (None: every class a record
+    keeps); `thresholds` averaged (None: every one the tables hold)."""
+
+    name: str = "Car mAP"
+    classes: tuple[str, ...] | None = ("car",)
+    thresholds: tuple[float, ...] | None = None
+
+    @classmethod
+    def of(cls, metric) -> "Statistic":
+        """From a family's MetricProtocol (match_class "*": every class)."""
+        every = metric.match_class in (None, "*")
+        return cls(metric.interval_statistic, None if every else (metric.match_class,), metric.interval_thresholds)
+
+    def columns(self, table: MatchTable) -> list[int]:
+        if self.thresholds is None:
+            return list(range(len(table.thresholds)))
+        out = [i for i, t in enumerate(table.thresholds) if any(abs(t - want) < 1e-9 for want in self.thresholds)]
+        if len(out) != len(self.thresholds):
+            raise ValueError(f"{self.name}: thresholds {list(self.thresholds)} are not all in the {table.class_name!r} "
+                             f"match table (it holds {list(table.thresholds)})")
+        return out
+
+    def value(self, tables: dict[str, MatchTable], counts) -> float:
+        """The statistic (percent) of one seed's tables on one draw of frames (counts None: each once)."""
+        per_class = []
+        for table in tables.values():
+            cols = self.columns(table)
+            ap = table_ap(table, counts)[cols] if table.kind == "nuscenes" else _coco_ap(table, counts, cols)
+            if not np.isnan(ap).all():  # COCO: a class without ground truth in the draw is not averaged
+                per_class.append(float(np.mean(ap)))
+        return 100.0 * float(np.mean(per_class)) if per_class else 0.0
+
+
+def _coco_ap(table: MatchTable, counts, cols: list[int]) -> np.ndarray:
+    from dsfec_jax.metrics.boxes2d.coco_matches import resampled_coco_ap
+    return resampled_coco_ap(table, counts, cols)[cols]  # only the averaged columns are computed
 
 
 def matches_entry(tables: dict[str, MatchTable]) -> dict:
@@ -28,54 +72,56 @@ def matches_entry(tables: dict[str, MatchTable]) -> dict:
     return {name: table.to_text() for name, table in tables.items()}
 
 
-def candidate_tables(records: list[dict]) -> dict[str, list[MatchTable]] | None:
-    """label -> match tables of its finished seeds; None if any finished trial has none (a journal
-    from before match tables were recorded, or a protocol without them, such as VoD's 3D AP)."""
-    out: dict[str, list[MatchTable]] = {}
+def candidate_tables(records: list[dict], statistic: Statistic = Statistic()
+                     ) -> dict[str, list[dict[str, MatchTable]]] | None:
+    """label -> one {class: match table} per finished seed; None if any finished trial lacks a
+    class the statistic needs (a journal from before match tables were recorded, or a protocol
+    without them, such as VoD's 3D AP)."""
+    out: dict[str, list[dict[str, MatchTable]]] = {}
     for r in records:
         if r["status"] != "ok":
             continue
-        text = r.get("matches", {}).get(CLASS)
-        if text is None:
+        kept = r.get("matches") or {}
+        names = statistic.classes if statistic.classes is not None else tuple(kept)
+        if not names or any(n not in kept for n in names):
             return None
-        out.setdefault(r["label"], []).append(MatchTable.from_text(text, f"trial {r['key']} ({r['label']})"))
+        out.setdefault(r["label"], []).append(
+            {n: MatchTable.from_text(kept[n], f"trial {r['key']} ({r['label']}), class {n}") for n in names})
     return out or None
 
 
-def _car_map(tables: list[MatchTable], counts) -> float:
-    return 100.0 * float(np.mean([resampled_ap(t, counts).mean() for t in tables]))
-
-
-def _draws(groups: dict[str, list[MatchTable]], frames: int, resamples: int, seed: int) -> np.ndarray:
-    """(B, C) Car mAP of every candidate on each draw of frames (and seeds, if there are several)."""
+def _draws(groups: dict[str, list[dict[str, MatchTable]]], frames: int, resamples: int, seed: int,
+           statistic: Statistic) -> np.ndarray:
+    """(B, C) statistic of every candidate on each draw of frames (and seeds, if there are several)."""
     counts = bootstrap_counts(frames, resamples, seed)
     n_seeds = max(len(t) for t in groups.values())
     picks = np.random.default_rng([seed, 1]).random((resamples, n_seeds))  # shared: seed draws stay paired
     out = np.empty((resamples, len(groups)))
-    for c, tables in enumerate(groups.values()):
-        per_seed = np.array([[100.0 * resampled_ap(t, k).mean() for t in tables] for k in counts])  # (B, S)
-        chosen = (picks * len(tables)).astype(int) if len(tables) > 1 else np.zeros((resamples, 1), int)
+    for c, seeds in enumerate(groups.values()):
+        per_seed = np.array([[statistic.value(tables, k) for tables in seeds] for k in counts])  # (B, S)
+        chosen = (picks * len(seeds)).astype(int) if len(seeds) > 1 else np.zeros((resamples, 1), int)
         out[:, c] = np.take_along_axis(per_seed, chosen, axis=1).mean(1)
     return out
 
 
 def paired_bootstrap(records: list[dict], base_label: str | None, resamples: int = RESAMPLES,
-                     seed: int = 0) -> dict | None:
-    """Bootstrap summary of the Car-mAP column, or None when the records carry no match tables."""
-    groups = candidate_tables(records)
+                     seed: int = 0, statistic: Statistic = Statistic()) -> dict | None:
+    """Bootstrap summary of the statistic's column (Car mAP by default), or None when the records
+    carry no match tables for it."""
+    groups = candidate_tables(records, statistic)
     if groups is None:
         return None
     labels = list(groups)
-    samples = groups[labels[0]][0].samples
-    for label, tables in groups.items():
-        if any(t.samples != samples for t in tables):
+    samples = next(iter(groups[labels[0]][0].values())).samples
+    for label, seeds in groups.items():
+        if any(t.samples != samples for tables in seeds for t in tables.values()):
             raise ValueError(f"candidate {label!r} was scored on other validation frames than {labels[0]!r}; "
                              "a paired bootstrap needs the same frames for every candidate")
-    point = np.array([_car_map(groups[label], None) for label in labels])
-    boot = _draws(groups, len(samples), resamples, seed)  # (B, C)
+    point = np.array([np.mean([statistic.value(tables, None) for tables in groups[label]]) for label in labels])
+    boot = _draws(groups, len(samples), resamples, seed, statistic)  # (B, C)
     taus = np.array([kendall_tau(list(b), list(point)) for b in boot]) if len(labels) > 1 else np.ones(1)
     taus = taus[~np.isnan(taus)]  # tau is undefined where every candidate ties (e.g. all at 0 mAP)
-    out = {"class": CLASS, "frames": len(samples), "seeds": max(len(t) for t in groups.values()),
+    out = {"statistic": statistic.name, "frames": len(samples), "seeds": max(len(t) for t in groups.values()),
            "resamples": resamples, "seed": seed,
            "point": dict(zip(labels, point.round(4).tolist())),
            "sd": dict(zip(labels, boot.std(0, ddof=1).round(4).tolist())),
@@ -99,7 +145,7 @@ def summary(result: dict) -> str:
     seeds = result.get("seeds", 1)
     over = f"the {result['frames']} validation frames" + (f" and the {seeds} seeds" if seeds > 1 else "")
     line = (f"{'Evaluation and training' if seeds > 1 else 'Evaluation'} noise (paired bootstrap over {over}, "
-            f"{result['resamples']} resamples, seed {result['seed']}): Car mAP sd "
+            f"{result['resamples']} resamples, seed {result['seed']}): {result.get('statistic', 'Car mAP')} sd "
             f"{min(sds):.2f}-{max(sds):.2f} per candidate; Kendall tau between a resample's ranking and the "
             + (f"table's: mean {result['rank_tau_mean']:.2f} (5th percentile {result['rank_tau_p05']:.2f})"
                if result["rank_tau_mean"] is not None else "table's: undefined (every candidate ties)")

@@ -19,6 +19,8 @@ from . import significance
 from .inherit import describe, initial_variables, source_weights
 from .recipes import get_recipe
 
+TRIAL_FIELDS = ("base", "label", "overrides", "recipe", "data", "seed", "strategy", "init", "supernet_steps",
+                "key")  # what make_trial writes; a record adds the measurements
 COST_COLUMNS = ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")  # what a record keeps of a profile
 
 
@@ -61,6 +63,30 @@ def run_trial(trial: dict, run_dir: str | Path) -> dict:
     return record
 
 
+def rescore(record: dict, run_dir: str | Path) -> dict:
+    """The "matches" field of a finished trial that has none (a journal from before its protocol
+    kept match tables): its run resumes at the last step, so nothing trains, and validates the final
+    weights. The recomputed headline must equal the recorded one, or the tables would describe
+    other weights (ValueError)."""
+    trial_dir = Path(run_dir) / "trials" / record["key"]
+    if record.get("strategy", "train") != "train":
+        raise ValueError(f"trial {record['key']}: a {record['strategy']!r} trial keeps no weights of its own to rescore")
+    if record.get("status") != "ok" or not (trial_dir / "checkpoints").is_dir():
+        raise ValueError(f"trial {record['key']} ({record.get('label')}): not a finished trial with checkpoints "
+                         f"under {trial_dir}")
+    scores = _fit_trial({k: v for k, v in record.items() if k in TRIAL_FIELDS}, trial_dir)
+    headline = zoo.family_of(record["base"]).metric.headline
+    was, now = record["metrics"].get(headline), scores.get(headline)
+    if was is None or now is None or abs(was - now) > 1e-6 * max(1.0, abs(was)):
+        raise ValueError(f"trial {record['key']} ({record.get('label')}): its final weights score {headline} {now}, "
+                         f"the journal says {was}; not adding match tables that describe other weights")
+    tables = scores.get("match_tables", {})
+    if not tables:
+        raise ValueError(f"trial {record['key']}: the {zoo.family_of(record['base']).metric.name} protocol keeps "
+                         "no match tables")
+    return significance.matches_entry(tables)
+
+
 def flat_metrics(scores: dict) -> dict:
     """Per-class APs of the VoD and RD protocols as top-level keys (AP_car, AP_corridor_car, AP50_car, ...), so a
     report column reads them like the headline figures; DSFEC's scores pass through."""
@@ -73,7 +99,8 @@ def flat_metrics(scores: dict) -> dict:
 
 def match_classes(family) -> tuple[str, ...]:
     """The classes whose per-frame matches a trial keeps for the report's bootstrap intervals
-    (the protocol's `match_class`: Car for DSFEC's nuScenes tables; none for VoD)."""
+    (the protocol's `match_class`: Car for DSFEC's nuScenes tables, "*" (every class) for the RD
+    tables; none for VoD)."""
     return (family.metric.match_class,) if family.metric.match_class else ()
 
 
@@ -97,16 +124,22 @@ def load_data(family, data: str, split: str, count: int):
     return load_frames(data, split, count, seed=0, features=family.input_columns)
 
 
-def measure(trial: dict, trial_dir: Path) -> dict:
+def _fit_trial(trial: dict, trial_dir: Path) -> dict:
+    """Train (or resume) the trial's run -> its final validation scores, match tables included."""
     recipe = get_recipe(trial["recipe"], trial["base"])
     family = zoo.family_of(trial["base"])
     overrides = {**trial["overrides"], **recipe.model_overrides()}
     frames, val = (load_data(family, trial["data"], split, n) for split, n in
                    (("train", recipe.train_frames), ("val", recipe.val_frames)))
-    _, _, scores = fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
-                       window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
-                       init_variables=initial_variables(trial.get("init", "scratch")),
-                       match_classes=match_classes(family))
+    return fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
+               window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
+               init_variables=initial_variables(trial.get("init", "scratch")),
+               match_classes=match_classes(family))[2]
+
+
+def measure(trial: dict, trial_dir: Path) -> dict:
+    recipe = get_recipe(trial["recipe"], trial["base"])
+    scores = _fit_trial(trial, trial_dir)
     tables = scores.pop("match_tables", {})
     # sizes and latency of the inference form (RadarNeXt: MobileOne branches fused), as the paper counts
     deployed = zoo.Detector(zoo.deploy_config(zoo.config(trial["base"], **trial["overrides"])))

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dsfec_jax.boxes.boxes2d import Boxes2D
 from dsfec_jax.data.points import nuscenes as nu
 from dsfec_jax.data.points.frame import Boxes, Frame
 from dsfec_jax.metrics import submission as sub
@@ -127,3 +128,31 @@ def random_scene(n_samples=12, seed=0):
         alarms = list(rng.uniform(-30, 30, size=(rng.integers(0, 4), 2)))
         pred[tok] = [box(tok, x, y, rng.random()) for x, y in hits + alarms]
     return gt, pred
+
+
+BOXES2D_CLASSES = ("car", "person", "truck")
+
+
+def boxes2d_scene(n_images=24, seed=0, sloppiness=1.0):
+    """2D ground truth and detections (sample id -> Boxes2D): jittered copies of most boxes (some
+    sloppy enough to miss at high IoU; `sloppiness` scales the jitter), random false positives, one
+    class absent from most images, scores with ties."""
+    rng = np.random.default_rng(seed)
+    gts, dets = {}, {}
+    for i in range(n_images):
+        k = int(rng.integers(0, 5))
+        xy = rng.uniform(0, 200, (k, 2))
+        wh = rng.uniform(10, 60, (k, 2))
+        gt = np.concatenate([xy, xy + wh], 1).astype(np.float32)
+        names = rng.choice(BOXES2D_CLASSES[:2] if i % 5 else BOXES2D_CLASSES, k)
+        keep = rng.random(k) < 0.8
+        jitter = rng.normal(0, sloppiness * rng.choice([1.0, 6.0]), (k, 4)).astype(np.float32)
+        det = gt[keep] + jitter[keep]
+        det = np.concatenate([np.minimum(det[:, :2], det[:, 2:]), np.maximum(det[:, :2], det[:, 2:])], 1)
+        fp_xy = rng.uniform(0, 200, (int(rng.integers(0, 4)), 2))
+        fp = np.concatenate([fp_xy, fp_xy + 20], 1).astype(np.float32)
+        det_names = np.concatenate([names[keep], rng.choice(BOXES2D_CLASSES, len(fp))])
+        scores = np.round(rng.uniform(0.05, 1, len(det_names)), 2).astype(np.float32)  # rounding: ties
+        gts[f"img{i:03d}"] = Boxes2D(gt, names)
+        dets[f"img{i:03d}"] = Boxes2D(np.concatenate([det, fp]).astype(np.float32), det_names, scores)
+    return gts, dets

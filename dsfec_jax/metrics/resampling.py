@@ -7,6 +7,9 @@ sample, score and hit flag at each threshold, plus the ground-truth count per sa
 any multiset of the samples (a bootstrap resample) follows exactly, without matching again: repeat each
 prediction as often as its sample is drawn (copies stay adjacent in score order) and rebuild the
 precision curve. With every sample drawn once it is `nuscenes.evaluate`'s AP to the last bit.
+
+The same table holds a COCO class (metrics.boxes2d.coco_matches: `kind` "coco", IoU thresholds, images
+as samples); `table_ap` scores either kind with its own AP.
 """
 
 from __future__ import annotations
@@ -20,26 +23,29 @@ import numpy as np
 
 from . import nuscenes
 
+KINDS = ("nuscenes", "coco")
+
 
 @dataclasses.dataclass(frozen=True)
 class MatchTable:
-    """One class: predictions in the devkit's order (highest score first) with their hit flags."""
+    """One class: predictions in the evaluator's order (highest score first) with their hit flags."""
 
     class_name: str
     samples: tuple[str, ...]   # sample tokens; `sample_of` and `npos` index them
     npos: np.ndarray           # (S,) ground-truth boxes of the class per sample (after the filters)
     sample_of: np.ndarray      # (P,) the sample of each prediction
     scores: np.ndarray         # (P,)
-    dist_ths: tuple[float, ...]
+    thresholds: tuple[float, ...]  # nuScenes: centre distances (m); COCO: IoUs
     is_tp: np.ndarray          # (T, P) bool: a hit at each threshold
+    kind: str = "nuscenes"     # whose AP the table resamples: "nuscenes" or "coco"
 
     def to_bytes(self) -> bytes:
         buf = io.BytesIO()
         # the rows are stored in score order, so the AP never reads the scores: float32 is plenty
         np.savez_compressed(buf, class_name=self.class_name, samples=np.array(self.samples),
                             npos=self.npos.astype(np.int32), sample_of=self.sample_of.astype(np.int32),
-                            scores=self.scores.astype(np.float32), dist_ths=np.array(self.dist_ths),
-                            is_tp=self.is_tp)
+                            scores=self.scores.astype(np.float32), dist_ths=np.array(self.thresholds),
+                            is_tp=self.is_tp, kind=self.kind)  # "dist_ths": the key of older journals
         return buf.getvalue()
 
     def to_text(self) -> str:
@@ -59,11 +65,14 @@ class MatchTable:
         try:
             z = np.load(io.BytesIO(data))
             table = cls(str(z["class_name"]), tuple(str(s) for s in z["samples"]), z["npos"], z["sample_of"],
-                        z["scores"], tuple(float(t) for t in z["dist_ths"]), z["is_tp"].astype(bool))
+                        z["scores"], tuple(float(t) for t in z["dist_ths"]), z["is_tp"].astype(bool),
+                        str(z["kind"]) if "kind" in z.files else "nuscenes")
         except (KeyError, ValueError, OSError) as err:
             raise ValueError(f"{source}: not a match table ({err})") from err
         p = len(table.scores)
-        if table.is_tp.shape != (len(table.dist_ths), p) or table.sample_of.shape != (p,) or \
+        if table.kind not in KINDS:
+            raise ValueError(f"{source}: match table kind {table.kind!r}; expected one of {KINDS}")
+        if table.is_tp.shape != (len(table.thresholds), p) or table.sample_of.shape != (p,) or \
                 table.npos.shape != (len(table.samples),):
             raise ValueError(f"{source}: inconsistent match table shapes (is_tp {table.is_tp.shape}, "
                              f"{p} scores, {len(table.samples)} samples, npos {table.npos.shape})")
@@ -92,12 +101,14 @@ def resampled_ap(table: MatchTable, counts: np.ndarray | None = None) -> np.ndar
     if counts.shape != (len(table.samples),):
         raise ValueError(f"counts has shape {counts.shape}; the table has {len(table.samples)} samples")
     npos = int(counts @ table.npos)
-    out = np.zeros(len(table.dist_ths))
+    if table.kind != "nuscenes":
+        raise ValueError(f"resampled_ap scores nuScenes tables; this one is {table.kind!r} (use table_ap)")
+    out = np.zeros(len(table.thresholds))
     if npos == 0:
         return out  # the devkit's no_predictions: AP 0
     rows = np.repeat(np.arange(len(table.scores)), counts[table.sample_of])
     recall_points = np.linspace(0, 1, nuscenes.NELEM)
-    for t in range(len(table.dist_ths)):
+    for t in range(len(table.thresholds)):
         hits = table.is_tp[t, rows]
         if not hits.any():
             continue
@@ -106,6 +117,15 @@ def resampled_ap(table: MatchTable, counts: np.ndarray | None = None) -> np.ndar
         precision = np.interp(recall_points, tp / float(npos), tp / (fp + tp), right=0)
         out[t] = nuscenes.ap_of_precision(precision)
     return out
+
+
+def table_ap(table: MatchTable, counts: np.ndarray | None = None) -> np.ndarray:
+    """(T,) AP at each threshold on a resampled set, with the AP of the table's kind: nuScenes' (0
+    without ground truth) or COCO's (NaN without ground truth, as COCOeval's -1)."""
+    if table.kind == "coco":
+        from .boxes2d.coco_matches import resampled_coco_ap
+        return resampled_coco_ap(table, counts)
+    return resampled_ap(table, counts)
 
 
 def bootstrap_counts(n_samples: int, resamples: int, seed: int = 0) -> np.ndarray:

@@ -23,13 +23,18 @@ class MetricProtocol:
     record names the metric rather than holding it). `headline` is the key that ranks candidates
     and keeps the best checkpoint; `columns` lay out its ablation tables; `keep` is what a weights
     manifest records of a validation; `match_class`, if set, is the class whose per-frame matches a
-    sweep keeps for bootstrap intervals, and `zero_class_note` names classes scoring 0 everywhere."""
+    sweep keeps for bootstrap intervals ("*": every class of the model), `interval_statistic` names
+    what those intervals resample (the mean over the kept classes of their AP averaged over
+    `interval_thresholds`, None: every threshold the tables hold), and `zero_class_note` names
+    classes scoring 0 everywhere."""
 
     name: str
     headline: str
     columns: tuple[Column, ...]
     keep: tuple[str, ...]
     match_class: str | None = None
+    interval_statistic: str = "Car mAP"
+    interval_thresholds: tuple[float, ...] | None = None
     zero_class_note: bool = False
 
 

@@ -49,14 +49,14 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val headline).
     `init_variables`: start from these trained variables where modules match (train.warm_start);
     `window_sampling`: how steps pick their training window (data.batches.BatchStream);
-    `match_classes` (nuScenes protocol): the headline also carries the last validation's
+    `match_classes` (evaluate.validate's): the headline also carries the last validation's
     "match_tables" (evaluate.score), kept out of the logged metrics. A range-Doppler model
     (frames and val are then RD samples) trains through train.fit_rd; windows do not apply."""
     _check_counts({"training frames": len(frames), "validation frames": len(val), "steps": steps})
     if zoo.family_of(zoo.config(model, **overrides)).modality == "rd":  # frames are RD samples
         from .fit_rd import fit_rd
         return fit_rd(model, overrides, frames, val, schedule, run_dir, seed, steps, augment, eval_every, run_info,
-                      progress, init_variables)
+                      progress, init_variables, match_classes=match_classes)
     det = zoo.create(model, **overrides)
     cfg = det.config
     family = zoo.family_of(cfg)

@@ -19,7 +19,7 @@ from ..data.rd.augment import RDAugment
 from ..data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
 from ..data.rd.representations import RDRepresentation
 from ..data.rd.sample import RDSample
-from ..evaluate_rd import evaluate_rd
+from ..evaluate import validate as run_validation
 from ..predict_rd import RDPredictor
 from .loop import RunSpec, train
 from .schedules import Schedule
@@ -29,8 +29,10 @@ def fit_rd(model: str, overrides: dict, samples: Sequence[RDSample], val: Sequen
            run_dir: str | Path, seed: int = 0, steps: int | None = None, augment: bool = True,
            eval_every: int | None = 200, run_info: dict | None = None, progress: bool = True,
            init_variables: dict | None = None, representation: RDRepresentation = RDRepresentation(),
-           max_boxes: int = DEFAULT_MAX_BOXES) -> tuple[zoo.Detector, dict, dict]:
-    """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val scores)."""
+           max_boxes: int = DEFAULT_MAX_BOXES, match_classes: Sequence[str] = ()) -> tuple[zoo.Detector, dict, dict]:
+    """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val scores).
+    `match_classes` (evaluate.validate's): the scores also carry the final validation's
+    "match_tables", kept out of the logged metrics."""
     det = zoo.create(model, **overrides)
     family = zoo.require_modality(det.config, "rd", "fit_rd")
     stream = RDBatchStream(samples, schedule.batch_size, seed, RDAugment() if augment else None, representation,
@@ -44,10 +46,17 @@ def fit_rd(model: str, overrides: dict, samples: Sequence[RDSample], val: Sequen
             "representation": jsonable(dataclasses.asdict(representation)), "max_boxes": max_boxes,
             "versions": versions()}
 
+    last_tables = {}  # the match tables of the latest validation, which the returned scores are
+
     def validate(state):
         variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
-        return evaluate_rd(RDPredictor(det, variables, representation), val)[0]
+        scores, tables = run_validation(family.metric.name, RDPredictor(det, variables, representation), val,
+                                        match_classes)
+        last_tables.clear()
+        last_tables.update(tables)
+        return scores
 
     state, scores = train(det, stream, spec, info, validate, eval_every or total, init_variables=init_variables,
                           best_key=family.metric.headline)
-    return det, state, scores if scores is not None else validate(state)
+    scores = scores if scores is not None else validate(state)
+    return det, state, {**scores, "match_tables": dict(last_tables)} if last_tables else scores

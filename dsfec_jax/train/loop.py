@@ -81,12 +81,16 @@ def _differences(old, new, prefix: str = "") -> list[tuple[str, object, object]]
     return [d for k in keys for d in _differences(old.get(k, absent), new.get(k, absent), f"{prefix}{k}.")]
 
 
-def _added_default(path: str, old, new) -> bool:
-    """A schedule field added to Schedule after the run started, at its default value: the run
-    trained with that value all along (e.g. optimizer 'adamw'), so its resume is not a new setup."""
-    field = path[len("schedule."):-1] if path.startswith("schedule.") else None
-    defaults = {f.name: f.default for f in dataclasses.fields(Schedule)}
-    return old == "<absent>" and field in defaults and json.loads(json.dumps(defaults[field])) == new
+def _added_default(path: str, old, new, config_type: type | None = None) -> bool:
+    """A field added to Schedule (or to the model's config dataclass) after the run started, at its
+    default value: the run trained with that value all along (e.g. optimizer 'adamw', or YOLO's
+    elastic width ratios at 1), so its resume is not a new setup."""
+    for prefix, cls in (("schedule.", Schedule), ("config.", config_type)):
+        if cls is not None and path.startswith(prefix):
+            defaults = {f.name: f.default for f in dataclasses.fields(cls) if f.default is not dataclasses.MISSING}
+            field = path[len(prefix):-1]
+            return old == "<absent>" and field in defaults and json.loads(json.dumps(defaults[field])) == new
+    return False
 
 
 def _setup(info: dict) -> dict:
@@ -99,7 +103,7 @@ def _show(diffs: list, side: int) -> str:
     return ", ".join(shown) + (f" (and {more} more)" if more > 0 else "")
 
 
-def _started_with(run_dir: Path, run_info: dict) -> dict | None:
+def _started_with(run_dir: Path, run_info: dict, config_type: type | None = None) -> dict | None:
     """The run.json of an existing run (None for a new one); RunMismatch when `run_info` asks for a
     different setup. A run killed before its first checkpoint is checked too: run.json says what
     the directory is for, and a new setup belongs in a new directory."""
@@ -110,7 +114,8 @@ def _started_with(run_dir: Path, run_info: dict) -> dict | None:
         old = json.loads(path.read_text())
     except json.JSONDecodeError as err:
         raise RunMismatch(f"{path}: not readable JSON ({err}); cannot tell which run this directory holds") from err
-    diffs = [d for d in _differences(_setup(old), _setup(json.loads(json.dumps(run_info)))) if not _added_default(*d)]
+    diffs = [d for d in _differences(_setup(old), _setup(json.loads(json.dumps(run_info))))
+             if not _added_default(*d, config_type)]
     if diffs:
         raise RunMismatch(f"{path}: this run was started with {_show(diffs, 0)}; the command asks "
                           f"{_show(diffs, 1)}. Use a new run directory (--run-dir) for a different setup, "
@@ -180,7 +185,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     `init_variables` (trained variables of this or a related network) seed a fresh run module by
     module (see warm_start); a resumed run ignores them."""
     spec.run_dir.mkdir(parents=True, exist_ok=True)
-    previous = _started_with(spec.run_dir, run_info)
+    previous = _started_with(spec.run_dir, run_info, type(detector.config))
     tx = optimizer(spec.schedule, spec.total_steps)
     state = _restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed), init_variables))
     start = int(state["step"])

@@ -1,12 +1,16 @@
 """One-shot NAS: python -m search.nas --space yolov8n_adapter [--profile smoke|quick|paper]
     [--strategy evolution|nsga2] [--max-params 2.65e6] [--max-gflops G] [--max-latency-ms MS]
     [--latency-table FILE] [--objective params|gflops|latency_ms]
-    [--seed 0] [--run-dir runs/nas/SPACE] [--register yolov8n_adapter_search]
+    [--seed 0] [--run-dir runs/nas/SPACE] [--standalone 5] [--spread 3] [--backend local|ray]
+    [--register yolov8n_adapter_search]
 
 Trains the space's weight-sharing supernet by SPOS (resumable), searches it under the limits
 (the paper's evolution, or Optuna's NSGA-II), and writes RUN_DIR/report.md with the generation
-table, the top subnets and Pareto plots (pareto_params.png, pareto_gflops.png). Run the same
-command again to resume a killed run.
+table, the top subnets and Pareto plots (pareto_params.png, pareto_gflops.png). --standalone K
+trains the top K subnets from scratch (and --spread N more across the ranking) with the family's
+recipe, in RUN_DIR/standalone, and adds the ranking study (Kendall tau, inherited against
+stand-alone mAP) to the report and RUN_DIR/ranking.json; --register then takes the best
+stand-alone subnet. Run the same command again to resume a killed run.
 """
 
 from __future__ import annotations
@@ -38,13 +42,23 @@ def main(argv=None) -> int:
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--register", default=None, metavar="NAME",
                    help="register the best subnet as zoo model NAME (e.g. yolov8n_adapter_search: models/yolo_rd/searched.json)")
+    p.add_argument("--standalone", type=int, default=0, metavar="K",
+                   help="train the top K subnets stand-alone (the family's recipe of this profile)")
+    p.add_argument("--spread", type=int, default=0, metavar="N",
+                   help="and N more spaced across the inherited ranking, for the ranking study")
+    p.add_argument("--backend", default="local", choices=("local", "ray"),
+                   help="stand-alone trainings here, or as Ray Tune trials")
+    p.add_argument("--address", default=None, help="with --backend ray: an existing cluster")
     args = p.parse_args(argv)
+    if args.standalone < 0 or args.spread < 0:
+        p.error("--standalone and --spread take counts >= 0")
     limits = {k: v for k, v in (("params", args.max_params), ("gflops", args.max_gflops),
                                 ("latency_ms", args.max_latency_ms)) if v is not None}
     run_dir = args.run_dir or f"runs/nas/{args.space}_{args.profile}_{args.strategy}"
     report = run_nas(args.space, run_dir, args.profile, args.strategy, limits, args.seed, args.objective,
                      command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress,
-                     register_as=args.register, latency_path=args.latency_table)
+                     register_as=args.register, latency_path=args.latency_table, standalone=args.standalone,
+                     spread=args.spread, backend=args.backend, address=args.address)
     print(f"report: {report}")
     return 0
 

@@ -54,13 +54,15 @@ def plot_pareto(records: list[dict], cost: str, metric: str, path: Path, title: 
 
 
 def write_report(run_dir: Path, header: str, progress: str, records: list[dict], metric: str,
-                 references: list[dict], meta: dict) -> Path:
+                 references: list[dict], meta: dict, standalone: str | None = None) -> Path:
+    """report.md and the Pareto plots; `standalone`: the stand-alone retraining section, if run."""
     costs = [c for c in COST_LABELS if records and all(c in r["costs"] for r in records)]
     for cost in costs:
         plot_pareto(records, cost, metric, run_dir / f"pareto_{cost}.png", f"{meta['space']}: {metric} vs {cost}",
                     references)
     text = "\n\n".join([header, "## Generations", progress, "## Top subnets (inherited weights)",
                         top_table(records, metric), "Pareto plots: " + ", ".join(f"`pareto_{c}.png`" for c in costs) + ".",
+                        *(["## Stand-alone retraining and the ranking study", standalone] if standalone else []),
                         "## Provenance", "```json\n" + json.dumps(meta, indent=1) + "\n```", ""])
     path = run_dir / "report.md"
     atomic.write_text(path, text)

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Callable
 
 from dsfec_jax import zoo
+from dsfec_jax.core import atomic
 from dsfec_jax.core.environment import environment
 from dsfec_jax.data.rd.sources import load_rd_samples
 from dsfec_jax.train.schedules import get_schedule
@@ -27,6 +28,8 @@ from .report import write_report
 from .space import SearchSpace
 from .spaces import get_space
 from .spos import SubnetScorer, model_costs, subnet_costs, train_supernet
+from .standalone import choose, ranking_study, retrain
+from .standalone import markdown as ranking_markdown
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,7 +99,11 @@ def shipped_reference(model: str) -> dict | None:
 def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strategy: str = "evolution",
             limits: dict | None = None, seed: int = 0, objective: str = "params", command: str = "",
             progress: bool = True, register_as: str | None = None, latency_path: str | None = None,
+            standalone: int = 0, spread: int = 0, backend: str = "local", address: str | None = None,
             log: Callable[[str], None] = print) -> Path:
+    """Supernet, search, reports; with `standalone` / `spread`, the top subnets (and `spread` more
+    across the ranking) trained stand-alone and the ranking study (search.nas.standalone); `register_as`
+    then registers the best stand-alone subnet instead of the best inherited one."""
     space = get_space(space_name)
     if space.name != "yolov8n_adapter":
         raise NotImplementedError(f"--space {space_name}: its supernet is not built yet (the engine's spaces, "
@@ -126,6 +133,7 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
     else:
         raise ValueError(f"--strategy {strategy!r}; expected 'evolution' or 'nsga2'")
     records = [r for r in Journal(run_dir).records() if r.get("status") == "ok"]
+    oneshot_s = _oneshot_seconds(run_dir, time.perf_counter() - t0)
     largest = space.largest()
     hand = space.encode({**space.decode(largest), **{c.name: 1 for c in space.choices if c.kind == "categorical"}})
     references = [{"label": f"{space.base} (inherited)", **costs(hand), **scorer([hand])[0]}]
@@ -137,13 +145,47 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
               f"Synthetic RD benchmark, profile `{profile}`: {steps} SPOS steps, {len(records)} subnets scored with "
               f"inherited weights (BN recalibrated on {p.calibration_batches} batches) on {len(val)} val maps; limits "
               f"{limits or 'none'}. Inherited-weight mAP ranks subnets; it is not a stand-alone mAP.")
-    report = write_report(run_dir, header, progress_text, records, metric, references, meta)
+    study = None
+    if standalone or spread:
+        chosen = choose(records, metric, standalone, spread)
+        log(f"stand-alone: training {len(chosen)} subnets ({standalone} top, {len(chosen) - min(standalone, len(chosen))} "
+            f"across the ranking) in {run_dir / 'standalone'}")
+        trained = retrain(space, chosen, run_dir, profile, seed, backend, address, command, log)
+        study = ranking_study(chosen, trained, metric, oneshot_s, len(records))
+        atomic.write_json(run_dir / "ranking.json", study)
+        meta["wall_s"] = round(time.perf_counter() - t0, 1)
+    report = write_report(run_dir, header, progress_text, records, metric, references, meta,
+                          ranking_markdown(study) if study else None)
     if register_as:
-        best = min(records, key=lambda r: (-r[metric], r["key"]))
-        register(space, tuple(best["genes"]), register_as,
-                 {**{k: meta[k] for k in ("command", "profile", "strategy", "limits", "seed", "supernet_steps")},
-                  "inherited": {metric: best[metric]}, "costs": best["costs"], "report": str(report),
-                  "versions": meta["environment"].get("versions")})
-        log(f"registered {register_as}: subnet {best['key']} ({metric} {best[metric]:.2f} inherited, "
-            f"{best['costs']['params'] / 1e6:.3f} M params)")
+        _register_best(space, records, study, metric, register_as, meta, report, log)
     return report
+
+
+def _oneshot_seconds(run_dir: Path, this_process_s: float) -> float:
+    """The one-shot part's wall time (supernet + search), kept in RUN_DIR/timing.json: the process
+    that finishes the search adds its time to what earlier ones recorded, later ones add nothing,
+    so the stand-alone cost ratio compares against the whole one-shot cost (a process killed
+    before the search's end records nothing, which makes the figure a lower bound)."""
+    path = run_dir / "timing.json"
+    timing = json.loads(path.read_text()) if path.exists() else {"oneshot_s": 0.0, "complete": False}
+    if not timing.get("complete"):
+        timing = {**timing, "oneshot_s": round(timing["oneshot_s"] + this_process_s, 1), "complete": True}
+        atomic.write_json(path, timing)
+    return float(timing["oneshot_s"])
+
+
+def _register_best(space: SearchSpace, records: list[dict], study: dict | None, metric: str, name: str, meta: dict,
+                   report: Path, log: Callable[[str], None]) -> None:
+    """Register the best stand-alone subnet when the run retrained some, else the best inherited one."""
+    inherited = {r["key"]: r for r in records}
+    if study and study["best_standalone"]:
+        best = inherited[study["best_standalone"]]
+        alone = next(p["standalone"] for p in study["pairs"] if p["key"] == best["key"])
+        scores, how = {"inherited": {metric: best[metric]}, "standalone": {metric: alone}}, f"{alone:.2f} stand-alone"
+    else:
+        best = min(records, key=lambda r: (-r[metric], r["key"]))
+        scores, how = {"inherited": {metric: best[metric]}}, f"{best[metric]:.2f} inherited"
+    register(space, tuple(best["genes"]), name,
+             {**{k: meta[k] for k in ("command", "profile", "strategy", "limits", "seed", "supernet_steps")},
+              **scores, "costs": best["costs"], "report": str(report), "versions": meta["environment"].get("versions")})
+    log(f"registered {name}: subnet {best['key']} ({metric} {how}, {best['costs']['params'] / 1e6:.3f} M params)")

@@ -44,7 +44,7 @@ def test_round_trip_and_bad_bytes():
     gt, pred = random_scene()
     table = rs.match_table(gt, pred, "car", drop_empty_gt=False)
     back = rs.MatchTable.from_bytes(table.to_bytes())
-    assert back.samples == table.samples and back.dist_ths == table.dist_ths
+    assert back.samples == table.samples and back.thresholds == table.thresholds and back.kind == "nuscenes"
     np.testing.assert_array_equal(rs.resampled_ap(back), rs.resampled_ap(table))
     with pytest.raises(ValueError, match="x.npz: not a match table"):
         rs.MatchTable.from_bytes(b"garbage", "x.npz")

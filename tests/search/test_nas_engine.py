@@ -208,3 +208,25 @@ def test_a_fitted_latency_table_absorbs_a_fixed_cost():
     plain = check(build(space, floored), space, floored, count=12, seed=5)
     fitted = check(build(space, floored, fit=60), space, floored, count=12, seed=5)
     assert fitted["mean_abs_error_pct"] < plain["mean_abs_error_pct"]
+
+
+def test_standalone_choice_takes_the_top_and_a_spread_and_the_study_pairs_them():
+    from search.nas.standalone import choose, markdown, ranking_study
+
+    records = [{"key": f"k{i:02d}", "status": "ok", "mAP50": float(20 - i)} for i in range(20)]
+    records.append({"key": "bad", "status": "failed"})
+    chosen = choose(records, "mAP50", 3, 3)
+    assert [r["key"] for r in chosen] == ["k00", "k01", "k02", "k03", "k11", "k19"]  # top 3, then rest's ends and middle
+    assert [r["key"] for r in choose(records, "mAP50", 2, 0)] == ["k00", "k01"]
+    # stand-alone scores: the inherited order reversed except one swap -> tau strongly negative
+    alone = {"k00": 1.0, "k01": 2.0, "k02": 3.0, "k03": 4.0, "k11": 6.0, "k19": 5.0}
+    trained = [{"label": k, "status": "ok", "metrics": {"mAP50": v}, "costs": {"params": 1e6}, "wall_s": 100.0}
+               for k, v in alone.items()]
+    study = ranking_study(chosen, trained, "mAP50", oneshot_s=600.0, scored=60)
+    assert study["cost"] == {"standalone_s_per_subnet": 100.0, "oneshot_s_per_subnet": 10.0, "ratio": 10.0}
+    assert study["n"] == 6 and study["best_standalone"] == "k11" and study["best_inherited"] == "k00"
+    assert study["tau"] == pytest.approx(-13 / 15, abs=1e-4)  # rounded to 4 places; 15 pairs: 1 concordant, 14 discordant
+    assert study["p_value"] == pytest.approx(1.0, abs=0.01)  # one-sided: no evidence of agreement
+    assert "Kendall tau between inherited and stand-alone mAP50 over 6 subnets: -0.87" in markdown(study)
+    assert "100 s per subnet stand-alone against 10 s one-shot" in markdown(study)
+    assert "too few" in markdown(ranking_study(chosen[:1], trained, "mAP50"))

@@ -1,11 +1,15 @@
 """The YOLO-RD table layouts (experiments/yolo_rd_tables.py): rows are configs of one family written
 as overrides of yolov8n, rows shared by tables map to one trial, and the printed table puts ours
-beside the paper's with the seed noise verdict (records made up here: no training)."""
+beside the paper's with the bootstrap noise verdict (records made up here from synthetic boxes: no
+training)."""
 
 import pytest
 
+from builders import BOXES2D_CLASSES, boxes2d_scene
 from dsfec_jax import zoo
+from dsfec_jax.metrics.boxes2d.coco import coco_evaluate
 from experiments import yolo_rd_tables as tables
+from search.significance import matches_entry
 
 
 def test_every_row_is_a_valid_config_and_shared_rows_share_overrides():
@@ -21,22 +25,40 @@ def test_every_row_is_a_valid_config_and_shared_rows_share_overrides():
     assert len(keys) == 15
 
 
-def record(overrides, seed, map50_95, params=3.0e6):
-    return {"status": "ok", "overrides": overrides, "seed": seed, "label": "x",
-            "metrics": {"mAP50": map50_95 + 20, "mAP70": map50_95 + 5, "mAP50_95": map50_95},
-            "costs": {"params": params}}
+def record(overrides, seed, sloppiness, fake_map=None):
+    """A trial record whose figures and match tables come from scoring a synthetic scene (the same
+    24 frames for every row; `sloppiness` scales the box jitter, so larger is worse; another seed
+    jitters a little more, as another training run would score a little differently)."""
+    gts, dets = boxes2d_scene(seed=0, sloppiness=sloppiness * (1 + 0.2 * seed))
+    m = coco_evaluate(gts, dets, BOXES2D_CLASSES, match_classes=BOXES2D_CLASSES)
+    return {"status": "ok", "overrides": overrides, "seed": seed, "label": "x", "key": f"{overrides}-{seed}",
+            "metrics": {"mAP50": 100 * m.ap50, "mAP70": 100 * m.ap70, "mAP50_95": 100 * m.map},
+            "costs": {"params": 3.0e6}, "matches": matches_entry(m.match_tables)}
 
 
-def test_markdown_gives_ours_beside_the_paper_and_the_noise_verdict():
+def test_markdown_gives_ours_beside_the_paper_and_the_bootstrap_verdict():
     adapter = tables.overrides_of(zoo.config("yolov8n_adapter"))
     fusion2 = tables.overrides_of(tables.fusion_variant(2))
-    records = [record(fusion2, 0, 10.0), record(fusion2, 1, 11.0), record(adapter, 0, 20.0), record(adapter, 1, 21.0)]
+    records = [record(fusion2, 0, 3.0), record(adapter, 0, 0.2), record(adapter, 1, 0.2)]
     text = tables.markdown("table6", records)
     lines = text.splitlines()
-    assert lines[2].startswith("| yolov8n_adapter fusion=2 | 2 | 30.5 ± 0.7 (68.9)")
-    assert "| yolov8n_adapter | 1 |" in text and "+10.0 (above noise)" in text
+    assert "Δ mAP50_95 vs row 1 [95 % CI]" in lines[0]
+    sharp, sloppy = records[1]["metrics"]["mAP50_95"], records[0]["metrics"]["mAP50_95"]
+    assert sharp > sloppy + 10
+    assert lines[2].startswith(f"| yolov8n_adapter fusion=2 | 2 | {records[0]['metrics']['mAP50']:.1f} (68.9)")
     assert "| - (67.8)" in lines[3]  # fusion 3: not run yet
-    assert "2 x pooled seed sd of mAP50_95 = 1.41 points" in text
+    row1 = next(line for line in lines if line.startswith("| yolov8n_adapter | 1 |"))
+    assert "above noise" in row1 and "± " in row1  # two seeds: mean ± sd
+    assert "mAP@50-95 sd" in text and "over the 24 validation frames and the 2 seeds" in text
+
+
+def test_a_copy_is_within_noise_and_old_records_say_how_to_get_intervals():
+    fusion2 = tables.overrides_of(tables.fusion_variant(2))
+    fusion3 = tables.overrides_of(tables.fusion_variant(3))
+    records = [record(fusion2, 0, 1.0), record(fusion3, 0, 1.0)]
+    assert "+0.0 [+0.0, +0.0] within noise" in tables.markdown("table6", records)
+    bare = [{k: v for k, v in r.items() if k != "matches"} for r in records]
+    assert "`python -m search.rescore RUN_DIR` adds them" in tables.markdown("table6", bare)
 
 
 def test_unknown_table_is_refused():

@@ -212,3 +212,23 @@ def test_a_run_started_before_a_schedule_field_existed_resumes_at_its_default(tm
     assert _started_with(tmp_path, {"seed": 0, "schedule": schedule}) is not None
     with pytest.raises(RunMismatch, match="schedule.optimizer"):
         _started_with(tmp_path, {"seed": 0, "schedule": {**schedule, "optimizer": "sgd"}})
+
+
+def test_a_run_started_before_a_config_field_existed_resumes_at_its_default(tmp_path):
+    """The same for the model's config (YOLO's elastic width ratios came after the RD tables' runs)."""
+    import dataclasses
+
+    from dsfec_jax import zoo
+    from dsfec_jax.core import atomic
+    from dsfec_jax.core.provenance import jsonable
+    from dsfec_jax.train.loop import RunMismatch, _started_with
+
+    cfg = zoo.config("yolov8n")
+    config = jsonable(dataclasses.asdict(cfg))
+    old = {k: v for k, v in config.items() if k not in ("backbone_width_ratios", "neck_width_ratios")}
+    atomic.write_json(tmp_path / "run.json", {"seed": 0, "config": old})
+    assert _started_with(tmp_path, {"seed": 0, "config": config}, type(cfg)) is not None
+    with pytest.raises(RunMismatch, match="config.neck_width_ratios"):
+        _started_with(tmp_path, {"seed": 0, "config": {**config, "neck_width_ratios": [0.5, 1.0, 1.0]}}, type(cfg))
+    with pytest.raises(RunMismatch, match="config.backbone_width_ratios"):  # without the config's type: no defaults
+        _started_with(tmp_path, {"seed": 0, "config": config})

@@ -13,6 +13,9 @@ mean over the recall points and categories that have ground truth). The 0.3 colu
 removed and COCOeval.summarize() runs on the 10 standard columns, so mAP@[.5:.95] and the 12
 stats average exactly the standard thresholds. AP@70 is a standard column.
 
+With `match_classes`, the result also carries those classes' per-image matches
+(coco_matches.MatchTable, kind "coco") for bootstrap intervals over the evaluated images.
+
 pycocotools conventions kept: an undefined number (no ground truth) is -1 in `stats`; the named
 fields turn it into NaN. A class without ground truth has per-class AP NaN. pycocotools' prints
 are silenced.
@@ -29,6 +32,8 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ...boxes.boxes2d import Boxes2D
+from ..resampling import MatchTable
+from . import coco_matches
 from .coco_json import CocoGroundTruth, coco_dets_to_list, coco_gt_to_dict, default_category_ids, default_image_ids
 
 COCO_IOU_THRESHOLDS = np.linspace(0.5, 0.95, int(np.round((0.95 - 0.5) / 0.05)) + 1, endpoint=True)  # as Params
@@ -46,6 +51,7 @@ class CocoMetrics:
     per_class_ap: dict[str, float]     # AP@[.5:.95] per class name; NaN without ground truth
     per_class_ap50: dict[str, float]
     stats: tuple[float, ...]           # COCOeval.stats, in STAT_NAMES order (-1 where undefined)
+    match_tables: dict[str, MatchTable] = dataclasses.field(default_factory=dict)  # of `match_classes`
 
     def as_dict(self) -> dict[str, float]:
         out = {"mAP@[.5:.95]": self.map, "AP50": self.ap50, "AP75": self.ap75, "AP30": self.ap30, "AP70": self.ap70}
@@ -102,7 +108,8 @@ def _standard_summary(evaluator) -> tuple[float, ...]:
 def coco_evaluate(gts: Mapping[str, Boxes2D] | CocoGroundTruth, dets: Mapping[str, Boxes2D],
                   classes: Sequence[str] | None = None, *, image_ids: Mapping[str, int] | None = None,
                   category_ids: Mapping[str, int] | None = None, areas: Mapping[str, np.ndarray] | None = None,
-                  iscrowd: Mapping[str, np.ndarray] | None = None) -> CocoMetrics:
+                  iscrowd: Mapping[str, np.ndarray] | None = None,
+                  match_classes: Sequence[str] = ()) -> CocoMetrics:
     """COCO AP of detections (sample id -> Boxes2D with scores) against ground truth (sample id ->
     Boxes2D, every scored frame, empty ones included), through COCO JSON and pycocotools.
 
@@ -128,6 +135,9 @@ def coco_evaluate(gts: Mapping[str, Boxes2D] | CocoGroundTruth, dets: Mapping[st
     ap = {t: _mean_defined(precision[_column(thresholds, t)]) for t in (0.3, 0.5, 0.7, 0.75)}
     per_class = {n: _mean_defined(precision[standard][:, :, k]) for k, n in enumerate(cat_names)}
     per_class50 = {n: _mean_defined(precision[_column(thresholds, 0.5), :, k]) for k, n in enumerate(cat_names)}
-    stats = _standard_summary(evaluator)
+    tables = {} if not match_classes else coco_matches.match_tables(
+        evaluator, names, {i: sample for sample, i in image_ids.items()}, match_classes)
+    stats = _standard_summary(evaluator)  # after the tables: it trims the evaluator's threshold columns
     return CocoMetrics(map=_mean_defined(precision[standard]), ap50=ap[0.5], ap75=ap[0.75], ap30=ap[0.3],
-                       ap70=ap[0.7], per_class_ap=per_class, per_class_ap50=per_class50, stats=stats)
+                       ap70=ap[0.7], per_class_ap=per_class, per_class_ap50=per_class50, stats=stats,
+                       match_tables=tables)
