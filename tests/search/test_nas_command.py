@@ -39,6 +39,13 @@ def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
     best = next(r for r in records if r["key"] == study["best_standalone"])  # registered: the best stand-alone
     cfg = searched_variants(searched)["smoke_search"]
     assert json.loads(searched.read_text())["smoke_search"]["provenance"]["standalone"]["mAP50"] is not None
+    # the remedies re-score the study without training; the run's own setting must reproduce its figures
+    from search.nas import remedies
+
+    assert remedies.main([str(run_dir), "--profile", "smoke", "--val-samples", "8", "--calibration-batches", "2,4"]) == 0
+    rows = json.loads((run_dir / "remedies.json").read_text())["rows"]
+    assert [(r["val_samples"], r["calibration_batches"]) for r in rows] == [(8, 2), (8, 4)]
+    assert rows[0]["standalone"] == pytest.approx([p["standalone"] for p in study["pairs"]], abs=1e-3)
     assert cfg.name == "smoke_search" and cfg.backbone_width_ratios == tuple(best["choices"][f"backbone{b}"] for b in range(1, 6))
 
 
