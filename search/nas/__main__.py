@@ -1,7 +1,8 @@
 """One-shot NAS: python -m search.nas --space yolov8n_adapter [--profile smoke|quick|paper]
     [--strategy evolution|nsga2] [--max-params 2.65e6] [--max-gflops G] [--max-latency-ms MS]
     [--latency-table FILE] [--objective params|gflops|latency_ms]
-    [--seed 0] [--run-dir runs/nas/SPACE] [--standalone 5] [--spread 3] [--backend local|ray]
+    [--seed 0] [--run-dir runs/nas/SPACE] [--standalone 5] [--spread 3]
+    [--spread-by score|params|gflops|latency_ms] [--backend local|ray]
     [--register yolov8n_adapter_search]
 
 Trains the space's weight-sharing supernet by SPOS (resumable), searches it under the limits
@@ -46,6 +47,8 @@ def main(argv=None) -> int:
                    help="train the top K subnets stand-alone (the family's recipe of this profile)")
     p.add_argument("--spread", type=int, default=0, metavar="N",
                    help="and N more spaced across the inherited ranking, for the ranking study")
+    p.add_argument("--spread-by", default="score", choices=("score", "params", "gflops", "latency_ms"),
+                   help="space the --spread subnets over the inherited ranking or over a cost's range")
     p.add_argument("--backend", default="local", choices=("local", "ray"),
                    help="stand-alone trainings here, or as Ray Tune trials")
     p.add_argument("--address", default=None, help="with --backend ray: an existing cluster")
@@ -58,7 +61,7 @@ def main(argv=None) -> int:
     report = run_nas(args.space, run_dir, args.profile, args.strategy, limits, args.seed, args.objective,
                      command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress,
                      register_as=args.register, latency_path=args.latency_table, standalone=args.standalone,
-                     spread=args.spread, backend=args.backend, address=args.address)
+                     spread=args.spread, spread_by=args.spread_by, backend=args.backend, address=args.address)
     print(f"report: {report}")
     return 0
 

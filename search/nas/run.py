@@ -99,7 +99,8 @@ def shipped_reference(model: str) -> dict | None:
 def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strategy: str = "evolution",
             limits: dict | None = None, seed: int = 0, objective: str = "params", command: str = "",
             progress: bool = True, register_as: str | None = None, latency_path: str | None = None,
-            standalone: int = 0, spread: int = 0, backend: str = "local", address: str | None = None,
+            standalone: int = 0, spread: int = 0, spread_by: str = "score", backend: str = "local",
+            address: str | None = None,
             log: Callable[[str], None] = print) -> Path:
     """Supernet, search, reports; with `standalone` / `spread`, the top subnets (and `spread` more
     across the ranking) trained stand-alone and the ranking study (search.nas.standalone); `register_as`
@@ -147,7 +148,7 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
               f"{limits or 'none'}. Inherited-weight mAP ranks subnets; it is not a stand-alone mAP.")
     study = None
     if standalone or spread:
-        chosen = choose(records, metric, standalone, spread)
+        chosen = choose(records, metric, standalone, spread, spread_by)
         log(f"stand-alone: training {len(chosen)} subnets ({standalone} top, {len(chosen) - min(standalone, len(chosen))} "
             f"across the ranking) in {run_dir / 'standalone'}")
         trained = retrain(space, chosen, run_dir, profile, seed, backend, address, command, log)

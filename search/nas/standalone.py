@@ -32,15 +32,28 @@ from .space import SearchSpace, from_key
 SUBDIR = "standalone"
 
 
-def choose(records: list[dict], metric: str, top: int, spread: int) -> list[dict]:
-    """The top `top` records by inherited `metric` (ties by key), then `spread` more at evenly
-    spaced ranks of the rest (best and worst of the rest included when spread >= 2)."""
+def choose(records: list[dict], metric: str, top: int, spread: int, spread_by: str = "score") -> list[dict]:
+    """The top `top` records by inherited `metric` (ties by key), then `spread` more evenly spaced
+    over the rest: by inherited rank (`spread_by` "score": the best and worst of the rest included
+    when spread >= 2) or over a cost's range ("params", "gflops", "latency_ms": the subnets nearest
+    to evenly spaced values from the rest's smallest to its largest cost, so the study spans the
+    constraint's range)."""
     ranked = sorted((r for r in records if r.get("status") == "ok"), key=lambda r: (-r[metric], r["key"]))
     chosen, rest = ranked[:top], ranked[top:]
-    if spread and rest:
+    if not spread or not rest:
+        return chosen
+    if spread_by == "score":
         at = np.unique(np.round(np.linspace(0, len(rest) - 1, min(spread, len(rest)))).astype(int))
-        chosen += [rest[i] for i in at]
-    return chosen
+        return chosen + [rest[i] for i in at]
+    if any(spread_by not in r["costs"] for r in rest):
+        raise ValueError(f"--spread-by {spread_by!r}: not a cost every scored subnet has "
+                         f"(they have {sorted(rest[0]['costs'])})")
+    costs = np.array([r["costs"][spread_by] for r in rest], float)
+    picked: list[int] = []
+    for target in np.linspace(costs.min(), costs.max(), min(spread, len(rest))):
+        free = [i for i in range(len(rest)) if i not in picked]
+        picked.append(min(free, key=lambda i: (abs(costs[i] - target), rest[i]["key"])))
+    return chosen + [rest[i] for i in picked]
 
 
 def retrain(space: SearchSpace, chosen: list[dict], run_dir: Path, recipe: str, seed: int = 0,

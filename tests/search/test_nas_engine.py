@@ -218,6 +218,14 @@ def test_standalone_choice_takes_the_top_and_a_spread_and_the_study_pairs_them()
     chosen = choose(records, "mAP50", 3, 3)
     assert [r["key"] for r in chosen] == ["k00", "k01", "k02", "k03", "k11", "k19"]  # top 3, then rest's ends and middle
     assert [r["key"] for r in choose(records, "mAP50", 2, 0)] == ["k00", "k01"]
+    # over the constraint's range: params 1.0 ... 2.9 M in an order unrelated to the score
+    for i, r in enumerate(records[:-1]):
+        r["costs"] = {"params": 1e6 + ((i * 7) % 20) * 1e5}
+    by_params = choose(records, "mAP50", 3, 3, "params")[3:]
+    rest_params = [r["costs"]["params"] for r in records[3:-1]]
+    assert [r["costs"]["params"] for r in by_params] == [min(rest_params), 2.0e6, max(rest_params)]
+    with pytest.raises(ValueError, match="--spread-by 'gflops'"):
+        choose(records, "mAP50", 3, 3, "gflops")
     # stand-alone scores: the inherited order reversed except one swap -> tau strongly negative
     alone = {"k00": 1.0, "k01": 2.0, "k02": 3.0, "k03": 4.0, "k11": 6.0, "k19": 5.0}
     trained = [{"label": k, "status": "ok", "metrics": {"mAP50": v}, "costs": {"params": 1e6}, "wall_s": 100.0}
