@@ -94,7 +94,7 @@ def markdown(table: list[dict], base_label: str | None, title: str, columns: tup
     base = next((r for r in table if r["label"] == base_label), None)
     head = ["candidate"] + [name for _, name, _ in columns]
     if sig is not None and "delta" in sig:
-        head.insert(2, f"Δ {sig.get('statistic', 'Car mAP')} 95 % CI (frames" + (", seeds)" if sig.get("seeds", 1) > 1 else ")"))
+        head.insert(2, f"Δ {sig['statistic']} 95 % CI (frames" + (", seeds)" if sig.get("seeds", 1) > 1 else ")"))
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in table:
         mark = " (base)" if r is base else ""

@@ -56,15 +56,10 @@ class Statistic:
         per_class = []
         for table in tables.values():
             cols = self.columns(table)
-            ap = table_ap(table, counts)[cols] if table.kind == "nuscenes" else _coco_ap(table, counts, cols)
+            ap = table_ap(table, counts, cols)[cols]
             if not np.isnan(ap).all():  # COCO: a class without ground truth in the draw is not averaged
                 per_class.append(float(np.mean(ap)))
         return 100.0 * float(np.mean(per_class)) if per_class else 0.0
-
-
-def _coco_ap(table: MatchTable, counts, cols: list[int]) -> np.ndarray:
-    from dsfec_jax.metrics.boxes2d.coco_matches import resampled_coco_ap
-    return resampled_coco_ap(table, counts, cols)[cols]  # only the averaged columns are computed
 
 
 def matches_entry(tables: dict[str, MatchTable]) -> dict:
@@ -145,7 +140,7 @@ def summary(result: dict) -> str:
     seeds = result.get("seeds", 1)
     over = f"the {result['frames']} validation frames" + (f" and the {seeds} seeds" if seeds > 1 else "")
     line = (f"{'Evaluation and training' if seeds > 1 else 'Evaluation'} noise (paired bootstrap over {over}, "
-            f"{result['resamples']} resamples, seed {result['seed']}): {result.get('statistic', 'Car mAP')} sd "
+            f"{result['resamples']} resamples, seed {result['seed']}): {result['statistic']} sd "
             f"{min(sds):.2f}-{max(sds):.2f} per candidate; Kendall tau between a resample's ranking and the "
             + (f"table's: mean {result['rank_tau_mean']:.2f} (5th percentile {result['rank_tau_p05']:.2f})"
                if result["rank_tau_mean"] is not None else "table's: undefined (every candidate ties)")

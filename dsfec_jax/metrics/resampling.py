@@ -119,12 +119,13 @@ def resampled_ap(table: MatchTable, counts: np.ndarray | None = None) -> np.ndar
     return out
 
 
-def table_ap(table: MatchTable, counts: np.ndarray | None = None) -> np.ndarray:
+def table_ap(table: MatchTable, counts: np.ndarray | None = None, columns: Sequence[int] | None = None) -> np.ndarray:
     """(T,) AP at each threshold on a resampled set, with the AP of the table's kind: nuScenes' (0
-    without ground truth) or COCO's (NaN without ground truth, as COCOeval's -1)."""
+    without ground truth) or COCO's (NaN without ground truth, as COCOeval's -1). `columns`: the
+    thresholds the caller reads (COCO computes only those, NaN elsewhere; nuScenes' four are cheap)."""
     if table.kind == "coco":
         from .boxes2d.coco_matches import resampled_coco_ap
-        return resampled_coco_ap(table, counts)
+        return resampled_coco_ap(table, counts, columns)
     return resampled_ap(table, counts)
 
 

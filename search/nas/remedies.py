@@ -27,15 +27,14 @@ from dsfec_jax.data.rd.sources import load_rd_samples
 from dsfec_jax.evaluate_rd import evaluate_rd
 from dsfec_jax.predict_rd import RDPredictor
 from dsfec_jax.train.loop import checkpoints
-from dsfec_jax.train.schedules import get_schedule
 
 from ..journal import Journal
 from ..ranking import kendall_tau, tau_p_value
 from ..recipes import get_recipe
-from .run import PROFILES
+from .run import PROFILES, supernet
 from .space import from_key
 from .spaces import get_space
-from .spos import SubnetScorer, train_supernet
+from .spos import SubnetScorer
 from .standalone import SUBDIR
 
 METRIC = "mAP50"
@@ -76,11 +75,8 @@ def main(argv=None) -> int:
     keys = [pair["key"] for pair in study["pairs"]]
     val_counts = [int(v) for v in args.val_samples.split(",")]
     batch_counts = [int(v) for v in args.calibration_batches.split(",")]
-    train = load_rd_samples("synthetic", "train", prof.train_samples)
     val_all = load_rd_samples("synthetic", "val", max(val_counts))
-    schedule = get_schedule(prof.schedule, batch_size=prof.batch_size)
-    steps = prof.supernet_steps or schedule.total_steps(len(train))
-    det, subnet_inputs, state = train_supernet(space, train, schedule, run_dir / "supernet", steps, args.seed, False)
+    train, _, (det, subnet_inputs, state) = supernet(space, prof, run_dir, args.seed, progress=False)
     alone = standalone_predictors(run_dir, keys)
     inherited_journal = {r["key"]: r[METRIC] for r in Journal(run_dir).records() if r.get("status") == "ok"}
     # the study's inherited scores are the journal's: the run's own setting must reproduce them

@@ -96,6 +96,15 @@ def shipped_reference(model: str) -> dict | None:
     return {"label": f"{model} (stand-alone, shipped)", **costs, **{k: val.get(k) for k in ("mAP50", "mAP50_95")}}
 
 
+def supernet(space: SearchSpace, p: NasProfile, run_dir: Path, seed: int = 0, progress: bool = True):
+    """The profile's training maps, SPOS step count and (detector, subnet inputs, state) of the run's
+    supernet: trained, or resumed from RUN_DIR/supernet (nothing trains once it is finished)."""
+    train = load_rd_samples("synthetic", "train", p.train_samples)
+    schedule = get_schedule(p.schedule, batch_size=p.batch_size)
+    steps = p.supernet_steps or schedule.total_steps(len(train))
+    return train, steps, train_supernet(space, train, schedule, run_dir / "supernet", steps, seed, progress)
+
+
 def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strategy: str = "evolution",
             limits: dict | None = None, seed: int = 0, objective: str = "params", command: str = "",
             progress: bool = True, register_as: str | None = None, latency_path: str | None = None,
@@ -112,11 +121,8 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
     p, run_dir, limits = PROFILES[profile], Path(run_dir), dict(limits or {})
     table = latency_table(space, latency_path, "latency_ms" in limits)  # before anything trains
     t0 = time.perf_counter()
-    train = load_rd_samples("synthetic", "train", p.train_samples)
     val = load_rd_samples("synthetic", "val", p.val_samples)
-    schedule = get_schedule(p.schedule, batch_size=p.batch_size)
-    steps = p.supernet_steps or schedule.total_steps(len(train))
-    det, subnet_inputs, state = train_supernet(space, train, schedule, run_dir / "supernet", steps, seed, progress)
+    train, steps, (det, subnet_inputs, state) = supernet(space, p, run_dir, seed, progress)
     t_supernet = time.perf_counter() - t0
     log(f"supernet: {steps} SPOS steps ({t_supernet:.0f} s including any earlier part of this run)")
     scorer = SubnetScorer(det, subnet_inputs, state, train, val, seed, p.calibration_batches, p.batch_size)

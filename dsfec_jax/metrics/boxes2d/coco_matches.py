@@ -26,7 +26,8 @@ def _class_table(evaluator, k: int, name: str, samples: tuple[str, ...]) -> Matc
     """Class k of an evaluated COCOeval at area 'all' and its largest maxDets, as accumulate reads it."""
     params = evaluator.params
     n_images, max_det = len(params.imgIds), params.maxDets[-1]
-    entries = evaluator.evalImgs[k * len(params.areaRng) * n_images:][:n_images]  # area index 0: 'all'
+    start = k * len(params.areaRng) * n_images  # evalImgs is [class][area][image]; area index 0: 'all'
+    entries = evaluator.evalImgs[start:start + n_images]
     npos = np.zeros(n_images, np.int64)
     scores, sample_of, matched, ignored = [], [], [], []
     for i, e in enumerate(entries):
