@@ -5,7 +5,9 @@ elastic depth field only, its supernet's `field`: DSFEC's stage_blocks) from the
 stage (Once-for-All's elastic depth), then trains with the recipe. Without it a 2-core `quick`
 profile leaves DSFEC-L at noise-level mAP (0.1-0.4 Car mAP after 150-500 CPU steps from scratch). The price is a bias toward the base's own depth (it starts as the exact
 trained network); it is named in every record (`init`) and report. Other axes (stem filters,
-activations) change what the trained weights mean, so they always train from scratch.
+activations) change what the trained weights mean, so they always train from scratch, except
+where the one-shot NAS asks for leading slices (`leading:NAME@SHA`: its width subnets retrained
+stand-alone start from the base's leading channels, as its supernet did; train.warm_start).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from pathlib import Path
 
 from dsfec_jax.core import checkpoint
 from dsfec_jax import zoo
+from dsfec_jax.train.warm_start import LeadingSlices
 
 from .recipes import get_recipe
 
@@ -26,20 +29,25 @@ def source_weights(base: str, overrides: dict, recipe: str) -> Path | None:
     return path if get_recipe(recipe, base).warm_start and depth_only and path.is_file() else None
 
 
-def describe(path: Path | None) -> str:
-    """'scratch' or 'NAME.msgpack@SHA256[:12]': part of a trial's identity and of its record."""
+LEADING = "leading:"
+
+
+def describe(path: Path | None, leading: bool = False) -> str:
+    """'scratch' or '[leading:]NAME.msgpack@SHA256[:12]': part of a trial's identity and of its record."""
     if path is None:
         return "scratch"
-    return f"{path.name}@{hashlib.sha256(path.read_bytes()).hexdigest()[:12]}"
+    return f"{LEADING if leading else ''}{path.name}@{hashlib.sha256(path.read_bytes()).hexdigest()[:12]}"
 
 
 def initial_variables(init: str) -> dict | None:
     """The variables a record's `init` names (None for scratch); the file must still match."""
     if init == "scratch":
         return None
-    name = init.split("@")[0]
+    leading = init.startswith(LEADING)
+    name = init.removeprefix(LEADING).split("@")[0]
     path = zoo.WEIGHTS_DIR / name
-    if describe(path) != init:
-        raise ValueError(f"{path}: the trial was planned from {init}, the file on disk is {describe(path)}; "
+    if describe(path, leading) != init:
+        raise ValueError(f"{path}: the trial was planned from {init}, the file on disk is {describe(path, leading)}; "
                          "use a new --out RUN_DIR for the new weights")
-    return checkpoint.load(path)
+    variables = checkpoint.load(path)
+    return LeadingSlices(variables) if leading else variables

@@ -37,9 +37,10 @@ def trial_key(spec: dict) -> str:
 
 
 def make_trial(base: str, candidate: dict, recipe: str, data: str, seed: int, strategy: str = "train",
-               supernet_steps: int | None = None) -> dict:
-    """`supernet_steps` (one-shot only): train the supernet this long instead of the recipe's length."""
-    init = describe(source_weights(base, candidate["overrides"], recipe))
+               supernet_steps: int | None = None, init: str | None = None) -> dict:
+    """`supernet_steps` (one-shot only): train the supernet this long instead of the recipe's length.
+    `init`: the weights it starts from (search.inherit.describe), else the recipe's choice."""
+    init = init or describe(source_weights(base, candidate["overrides"], recipe))
     spec = {"base": base, "label": candidate["label"], "overrides": candidate["overrides"], "recipe": recipe,
             "data": data, "seed": seed, "strategy": strategy, "init": init}
     if supernet_steps is not None:

@@ -192,7 +192,9 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     _record_start(spec.run_dir, run_info, previous, start)
     log_path = spec.run_dir / "metrics.jsonl"
     _trim_metrics(log_path, start)
-    step_fns = [make_train_step(d, tx) for d in (window_detectors or [detector])]
+    # a detector may bring its own step (a depth supernet keeps its idle blocks still)
+    step_fns = [d.make_train_step(tx) if hasattr(d, "make_train_step") else make_train_step(d, tx)
+                for d in (window_detectors or [detector])]
     end = spec.total_steps if spec.stop_at is None else min(spec.stop_at, spec.total_steps)
     best = _best_score(spec.run_dir, best_key)
     scores = None

@@ -35,6 +35,8 @@ import numpy as np
 from dsfec_jax import zoo
 from dsfec_jax.layers.yolo import PaddedConv, YoloConv
 
+from .slices import masked_apply  # noqa: F401  (masks on conv blocks' outputs, by module path)
+
 Path = tuple[str, ...]
 
 
@@ -95,25 +97,6 @@ def masks(supernet, subnet) -> dict[str, jax.Array]:
         m[kept] = 1.0
         out["/".join(p)] = jnp.asarray(m)
     return out
-
-
-def _mask_interceptor(channel_masks: dict):
-    def interceptor(next_fun, args, kwargs, context):
-        out = next_fun(*args, **kwargs)
-        if isinstance(context.module, YoloConv) and context.method_name == "__call__":
-            m = channel_masks.get("/".join(context.module.scope.path))
-            if m is not None:
-                out = out * m
-        return out
-
-    return interceptor
-
-
-def masked_apply(supernet, variables: dict, inputs: dict, channel_masks: dict, train: bool = False):
-    """The supernet's head outputs for the subnet the masks select (as `Detector.apply`); jit it
-    with the masks as an argument and every subnet runs through one compiled function."""
-    with nn.intercept_methods(_mask_interceptor(channel_masks)):
-        return supernet.apply(variables, inputs, train=train)
 
 
 def probe_inputs(supernet, variables: dict, channel_masks: dict) -> dict[Path, np.ndarray]:

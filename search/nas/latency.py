@@ -8,12 +8,15 @@ the entries then being the least-squares fit to all of them. A subnet's predicte
 base plus its blocks' changes. It ignores how blocks interact (a narrower block also makes the next block's input
 narrower), so `check` measures sampled subnets whole and reports the prediction's error; the
 search then filters on a prediction whose error is stated, as the latency-constrained NAS tools
-do (OFA, FBNet: per-op tables summed).
+do (OFA, FBNet: per-op tables summed). The checked subnets are measured in the same interleaved run
+as the table's own, and left out of its fit.
 
 Measurements: jitted JAX (`profile.latency`: stand-in weights of the subnet's shapes, batch 1,
-the medians of interleaved repeats), on the threads the process is pinned to:
+the medians of interleaved repeats), on the threads the process is pinned to, or ONNX Runtime on
+each subnet's exported network (`--runtime onnx`, the deployment runtime):
 
-    python -m search.nas.latency --space yolov8n_adapter [--threads 1] [--fit 48] [--check 8] [--out FILE]
+    python -m search.nas.latency --space yolov8n_adapter [--runtime jax|onnx] [--threads 1] [--fit 48]
+        [--check 8] [--out FILE]
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import sys
 from pathlib import Path
 from typing import Callable, Sequence
 
+import jax
 import numpy as np
 
 from dsfec_jax import zoo
@@ -104,13 +108,40 @@ def _fitted(space: SearchSpace, ms: dict, setup: dict) -> LatencyTable:
 
 def check(table: LatencyTable, space: SearchSpace, measure: Measure, count: int = 8, seed: int = 0) -> dict:
     """Measure `count` sampled subnets whole against the table: per-subnet rows and the error."""
+    subnets = _sampled(space, count, seed)
+    return _errors(table, subnets, measure(subnets))
+
+
+def _sampled(space: SearchSpace, count: int, seed) -> list[Genes]:
     rng = np.random.default_rng(seed)
-    subnets = list(dict.fromkeys(space.sample(rng) for _ in range(count)))
-    measured = measure(subnets)
+    return list(dict.fromkeys(space.sample(rng) for _ in range(count)))
+
+
+def _errors(table: LatencyTable, subnets: list[Genes], measured: list[float]) -> dict:
     rows = [{"subnet": key(g), "measured_ms": m, "predicted_ms": table.predict(g)} for g, m in zip(subnets, measured)]
     errors = np.array([100 * (r["predicted_ms"] - r["measured_ms"]) / r["measured_ms"] for r in rows])
     return {"rows": rows, "mean_abs_error_pct": float(np.mean(np.abs(errors))),
             "max_abs_error_pct": float(np.max(np.abs(errors))), "mean_error_pct": float(np.mean(errors))}
+
+
+def build_checked(space: SearchSpace, measure: Measure, setup: dict, fit: int, count: int, seed: int = 0) -> LatencyTable:
+    """The table fitted as `build` does, and its error on `count` more sampled subnets that the fit
+    never saw, all measured in one interleaved run: a CPU's state drifts between runs (a separate
+    check run on this box read 30 % below the fit's run), so only one run compares like with like."""
+    fitted = one_at_a_time(space)
+    rng = np.random.default_rng([seed, 1])
+    fitted += [s for s in dict.fromkeys(space.sample(rng) for _ in range(fit)) if s not in fitted]
+    held_out = [s for s in _sampled(space, count, seed + 1000) if s not in fitted]
+    ms = dict(zip(fitted + held_out, measure(fitted + held_out)))
+    top = space.largest()
+    if fit:
+        table = _fitted(space, {s: ms[s] for s in fitted}, setup)
+    else:
+        deltas = [[ms[top[:i] + (o,) + top[i + 1:]] - ms[top] for o in range(len(c.options))]
+                  for i, c in enumerate(space.choices)]
+        table = LatencyTable(space.name, ms[top], deltas, dict(setup))
+    table.setup["check"] = {**_errors(table, held_out, [ms[s] for s in held_out]), "same_run": True}
+    return table
 
 
 def jax_measure(space: SearchSpace, repeats: int = 10, warmup: int = 2) -> Measure:
@@ -128,12 +159,48 @@ def jax_measure(space: SearchSpace, repeats: int = 10, warmup: int = 2) -> Measu
     return measure
 
 
+def onnx_measure(space: SearchSpace, repeats: int = 10, warmup: int = 2, threads: int = 1) -> Measure:
+    """Whole-network latency of stand-alone subnets in ONNX Runtime (`threads` intra-op threads),
+    interleaved: each subnet's network (stand-in weights of its shapes, batch 1) exported by
+    jax2onnx as `dsfec export` writes it (DSFEC's grouped depthwise kernel, YOLO's 1x1 convs as
+    MatMul), without the decode."""
+    import tempfile
+
+    from dsfec_jax.deploy.export import grouped, onnx_model
+    from dsfec_jax.deploy.ort import ort_session
+    from dsfec_jax.profile.latency import time_interleaved, timing_variables
+
+    def session(genes: Genes, workdir: Path):
+        det = zoo.create(space.base, **space.overrides(genes))
+        rd = zoo.family_of(det.config).modality == "rd"
+        det = det if rd else grouped(det)
+        variables, inputs = timing_variables(det), det.dummy_inputs(1)
+        names = list(inputs)
+        fn = lambda *x: tuple(jax.tree.leaves(det.apply(variables, dict(zip(names, x)))))  # noqa: E731
+        specs = [jax.ShapeDtypeStruct(inputs[k].shape, inputs[k].dtype) for k in names]
+        outputs = [f"out{i}" for i in range(len(jax.eval_shape(fn, *specs)))]
+        path = workdir / f"{key(genes)}.onnx"
+        path.write_bytes(onnx_model(fn, specs, names, outputs, matmul_einsums=rd).SerializeToString())
+        sess, feeds = ort_session(path, threads), {k: np.asarray(v) for k, v in inputs.items()}
+        return lambda: sess.run(None, feeds)
+
+    def measure(subnets: list[Genes]) -> list[float]:
+        with tempfile.TemporaryDirectory() as tmp:
+            suites = {key(g): {"total": session(g, Path(tmp))} for g in subnets}
+            times = time_interleaved(suites, repeats, warmup)
+        return [times[key(g)]["total"]["median_ms"] for g in subnets]
+
+    return measure
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     p = argparse.ArgumentParser(prog="python -m search.nas.latency", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--space", required=True)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--runtime", default="jax", choices=("jax", "onnx"),
+                   help="jitted JAX (profile.latency) or ONNX Runtime on the exported network")
     p.add_argument("--repeats", type=int, default=10)
     p.add_argument("--check", type=int, default=8, help="sampled subnets measured whole to report the error")
     p.add_argument("--fit", type=int, default=48, help="random subnets measured too; the entries are then "
@@ -146,11 +213,11 @@ def main(argv=None) -> int:
     threads.check(args.threads)
     threads.pin(args.threads)
     space = get_space(args.space)
-    measure = jax_measure(space, args.repeats)
-    setup = {"command": shlex.join(["python", "-m", "search.nas.latency", *argv]), "runtime": "jax",
+    measure = (onnx_measure(space, args.repeats, threads=args.threads) if args.runtime == "onnx"
+               else jax_measure(space, args.repeats))
+    setup = {"command": shlex.join(["python", "-m", "search.nas.latency", *argv]), "runtime": args.runtime,
              "threads": args.threads, "repeats": args.repeats, "environment": environment()}
-    table = build(space, measure, setup, args.fit, args.seed)
-    table.setup["check"] = check(table, space, measure, args.check, args.seed + 1000)  # other subnets than the fit's
+    table = build_checked(space, measure, setup, args.fit, args.check, args.seed)
     out = Path(args.out) if args.out else RECORDS / f"latency_{space.name}.json"
     table.save(out)
     c = table.setup["check"]

@@ -20,6 +20,7 @@ from dsfec_jax.core.environment import environment
 from dsfec_jax.data.rd.sources import load_rd_samples
 from dsfec_jax.train.schedules import get_schedule
 
+from ..inherit import describe
 from ..journal import Journal
 from .evolution import Evolution, EvolutionSettings, progress_table
 from .latency import RECORDS, LatencyTable
@@ -105,6 +106,55 @@ def supernet(space: SearchSpace, p: NasProfile, run_dir: Path, seed: int = 0, pr
     return train, steps, train_supernet(space, train, schedule, run_dir / "supernet", steps, seed, progress)
 
 
+@dataclasses.dataclass
+class Engine:
+    """What a family brings to a run: its trained supernet's steps, the subnet scorer, the metric
+    that ranks subnets, and how the report names its data."""
+
+    steps: int
+    scorer: Callable
+    metric: str
+    data: str
+    calibration: str
+    init: str | None = None  # what the supernet started from, given to the stand-alone retraining too
+
+
+def rd_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path, seed: int, progress: bool) -> Engine:
+    val = load_rd_samples("synthetic", "val", p.val_samples)
+    train, steps, (det, subnet_inputs, state) = supernet(space, p, run_dir, seed, progress)
+    scorer = SubnetScorer(det, subnet_inputs, state, train, val, seed, p.calibration_batches, p.batch_size)
+    return Engine(steps, scorer, "mAP50", f"synthetic RD benchmark, {len(val)} val maps",
+                  f"{p.calibration_batches} batches of {p.batch_size} maps")
+
+
+def point_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path, seed: int, progress: bool) -> Engine:
+    """DSFEC-style families: the family's search recipe of the same name sets the data, grid and
+    batch (search.recipes); the NAS profile the SPOS steps and the calibration frames (as many
+    as the RD profile's)."""
+    from dsfec_jax.data.points.sources import load_frames
+
+    from ..recipes import get_recipe
+    from .spos_points import PointSubnetScorer, train_point_supernet
+
+    recipe, family = get_recipe(profile, space.base), zoo.family_of(space.base)
+    frames = load_frames(recipe.data, "train", recipe.train_frames, seed=0, features=family.input_columns)
+    val = load_frames(recipe.data, "val", recipe.val_frames, seed=0, features=family.input_columns)
+    steps = p.supernet_steps or recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
+    det, validator, subnet_inputs, state, stream = train_point_supernet(space, recipe, frames, run_dir / "supernet",
+                                                                       steps, seed, progress)
+    batch = recipe.schedule.batch_size
+    calibration = max(1, p.calibration_batches * p.batch_size // batch)
+    scorer = PointSubnetScorer(det, validator, subnet_inputs, state, stream, val, calibration)
+    shipped = zoo.shipped_weights(space.base)
+    return Engine(steps, scorer, family.metric.headline,
+                  f"`{recipe.data}` point-cloud benchmark at the `{profile}` search recipe's grid, {len(val)} val frames",
+                  f"{calibration} batches of {batch} frames", describe(shipped, leading=True) if shipped.is_file() else None)
+
+
+def engine_for(space: SearchSpace):
+    return rd_engine if zoo.family_of(space.base).modality == "rd" else point_engine
+
+
 def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strategy: str = "evolution",
             limits: dict | None = None, seed: int = 0, objective: str = "params", command: str = "",
             progress: bool = True, register_as: str | None = None, latency_path: str | None = None,
@@ -115,19 +165,13 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
     across the ranking) trained stand-alone and the ranking study (search.nas.standalone); `register_as`
     then registers the best stand-alone subnet instead of the best inherited one."""
     space = get_space(space_name)
-    if space.name != "yolov8n_adapter":
-        raise NotImplementedError(f"--space {space_name}: its supernet is not built yet (the engine's spaces, "
-                                  "evolution and NSGA-II take it; only yolov8n_adapter has a supernet so far)")
     p, run_dir, limits = PROFILES[profile], Path(run_dir), dict(limits or {})
     table = latency_table(space, latency_path, "latency_ms" in limits)  # before anything trains
     t0 = time.perf_counter()
-    val = load_rd_samples("synthetic", "val", p.val_samples)
-    train, steps, (det, subnet_inputs, state) = supernet(space, p, run_dir, seed, progress)
-    t_supernet = time.perf_counter() - t0
-    log(f"supernet: {steps} SPOS steps ({t_supernet:.0f} s including any earlier part of this run)")
-    scorer = SubnetScorer(det, subnet_inputs, state, train, val, seed, p.calibration_batches, p.batch_size)
+    engine = engine_for(space)(space, p, profile, run_dir, seed, progress)
+    steps, scorer, metric = engine.steps, engine.scorer, engine.metric
+    log(f"supernet: {steps} SPOS steps ({time.perf_counter() - t0:.0f} s including any earlier part of this run)")
     costs = CachedCosts(space, table)
-    metric = "mAP50"
     if strategy == "evolution":
         settings = EvolutionSettings(p.population, p.generations, p.top_k, metric=metric, seed=seed)
         progress_text = progress_table(Evolution(space, scorer, costs, run_dir, settings, limits, log).run())
@@ -141,23 +185,23 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
         raise ValueError(f"--strategy {strategy!r}; expected 'evolution' or 'nsga2'")
     records = [r for r in Journal(run_dir).records() if r.get("status") == "ok"]
     oneshot_s = _oneshot_seconds(run_dir, time.perf_counter() - t0)
-    largest = space.largest()
-    hand = space.encode({**space.decode(largest), **{c.name: 1 for c in space.choices if c.kind == "categorical"}})
+    hand = space.base_genes()
     references = [{"label": f"{space.base} (inherited)", **costs(hand), **scorer([hand])[0]}]
-    references += [r for r in (shipped_reference(m) for m in ("yolov8n", space.base)) if r]
+    if zoo.family_of(space.base).modality == "rd":  # shipped manifests score the same val maps
+        references += [r for r in (shipped_reference(m) for m in ("yolov8n", space.base)) if r]
     meta = {"command": command, "space": space.name, "space_size": space.size(), "profile": profile,
             "strategy": strategy, "limits": limits, "seed": seed, "supernet_steps": steps,
             "wall_s": round(time.perf_counter() - t0, 1), "environment": environment()}
     header = (f"# One-shot NAS: {space.name} ({space.description}; {space.size():,} subnets)\n\n"
-              f"Synthetic RD benchmark, profile `{profile}`: {steps} SPOS steps, {len(records)} subnets scored with "
-              f"inherited weights (BN recalibrated on {p.calibration_batches} batches) on {len(val)} val maps; limits "
-              f"{limits or 'none'}. Inherited-weight mAP ranks subnets; it is not a stand-alone mAP.")
+              f"Profile `{profile}` on the {engine.data}: {steps} SPOS steps, {len(records)} subnets scored with "
+              f"inherited weights (BN recalibrated on {engine.calibration}); limits {limits or 'none'}. "
+              f"Inherited-weight {metric} ranks subnets; it is not a stand-alone score.")
     study = None
     if standalone or spread:
         chosen = choose(records, metric, standalone, spread, spread_by)
         log(f"stand-alone: training {len(chosen)} subnets ({standalone} top, {len(chosen) - min(standalone, len(chosen))} "
             f"across the ranking) in {run_dir / 'standalone'}")
-        trained = retrain(space, chosen, run_dir, profile, seed, backend, address, command, log)
+        trained = retrain(space, chosen, run_dir, profile, seed, backend, address, command, log, engine.init)
         study = ranking_study(chosen, trained, metric, oneshot_s, len(records))
         atomic.write_json(run_dir / "ranking.json", study)
         meta["wall_s"] = round(time.perf_counter() - t0, 1)

@@ -56,6 +56,7 @@ class SearchSpace:
     choices: tuple[Choice, ...]
     to_overrides: Callable[[dict], dict] = dataclasses.field(compare=False)
     description: str = ""
+    base_choices: dict = dataclasses.field(default_factory=dict, compare=False)  # the base model's, where not largest
 
     def __post_init__(self):
         names = [c.name for c in self.choices]
@@ -118,6 +119,10 @@ class SearchSpace:
     def largest(self) -> Genes:
         """Every block at its last option (by convention the widest / deepest)."""
         return tuple(len(c.options) - 1 for c in self.choices)
+
+    def base_genes(self) -> Genes:
+        """The subnet that is the base model itself (the report's hand-designed reference)."""
+        return self.encode({**self.decode(self.largest()), **self.base_choices})
 
     def smallest(self) -> Genes:
         return (0,) * len(self.choices)

@@ -38,7 +38,7 @@ def yolov8n_adapter_space(base: str = "yolov8n_adapter") -> SearchSpace:
                 "neck_width_ratios": tuple(c[x.name] for x in neck)}
 
     return SearchSpace("yolov8n_adapter", base, tuple(backbone + stem + exchangers + neck), to_overrides,
-                       "the YOLOv8n-Adapter paper's Table 1")
+                       "the YOLOv8n-Adapter paper's Table 1", {x.name: 1 for x in exchangers})
 
 
 def dsfec_space(base: str = "dsfec_m") -> SearchSpace:
@@ -55,8 +55,9 @@ def dsfec_space(base: str = "dsfec_m") -> SearchSpace:
         out["stage_blocks"] = tuple(c[x.name] for x in blocks)
         return out
 
+    own = {stem.name: cfg.stem_filters, **{x.name: n for x, n in zip(blocks, cfg.stage_blocks)}}
     return SearchSpace("dsfec", base, (stem, *widths, *blocks), to_overrides,
-                       "DSFEC's stem filters, stage widths and blocks per stage, jointly")
+                       "DSFEC's stem filters, stage widths and blocks per stage, jointly", own)
 
 
 SPACES = {"yolov8n_adapter": yolov8n_adapter_space, "dsfec": dsfec_space}

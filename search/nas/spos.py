@@ -124,9 +124,9 @@ class SubnetRDPredictor(RDPredictor):
         return super().run({**inputs, **self.subnet})
 
 
-def recalibrator(det: SupernetDetector):
+def recalibrator(det, momentum: float = BN_MOMENTUM):
     """(variables, batches, subnet inputs) -> BN running statistics of that subnet = the mean of its
-    batch statistics over the batches (every YOLO BN has momentum BN_MOMENTUM)."""
+    batch statistics over the batches (every BN of the network has `momentum`: YOLO's BN_MOMENTUM)."""
     batch_stats = jax.jit(lambda v, x: det.apply(v, x, train=True)[1]["batch_stats"])
 
     def recalibrate(variables: dict, batches: Sequence[dict], subnet: dict) -> dict:
@@ -134,10 +134,23 @@ def recalibrator(det: SupernetDetector):
         for inputs in batches:
             new, old = batch_stats(variables, {**inputs, **subnet}), variables["batch_stats"]
             # new = m * old + (1 - m) * batch  =>  batch = (new - m * old) / (1 - m)
-            means.append(jax.tree.map(lambda n, o: (n - BN_MOMENTUM * o) / (1 - BN_MOMENTUM), new, old))
+            means.append(jax.tree.map(lambda n, o: (n - momentum * o) / (1 - momentum), new, old))
         return jax.tree.map(lambda *x: jnp.mean(jnp.stack(x), 0), *means)
 
     return recalibrate
+
+
+def score_inherited(scorer, batch: list[Genes]) -> list[dict]:
+    """A scorer's loop over subnets (the RD and point scorers share it): recalibrate the subnet's BN
+    statistics, put them and the subnet into the predictor, `scorer.evaluate()`."""
+    out = []
+    for genes in batch:
+        subnet = scorer.subnet_inputs(genes)
+        stats = scorer.recalibrate({"params": scorer.params, "batch_stats": scorer.start_stats}, scorer.batches, subnet)
+        scorer.predictor.variables = {"params": scorer.params, "batch_stats": stats}
+        scorer.predictor.subnet = subnet
+        out.append(scorer.evaluate())
+    return out
 
 
 class SubnetScorer:
@@ -154,16 +167,11 @@ class SubnetScorer:
         self.start_stats = state["batch_stats"]
         self.predictor = SubnetRDPredictor(det, {"params": self.params, "batch_stats": self.start_stats})
 
-    def __call__(self, batch: list[Genes]) -> list[dict]:
-        out = []
-        for genes in batch:
-            subnet = self.subnet_inputs(genes)
-            stats = self.recalibrate({"params": self.params, "batch_stats": self.start_stats}, self.batches, subnet)
-            self.predictor.variables = {"params": self.params, "batch_stats": stats}
-            self.predictor.subnet = subnet
-            scores = evaluate_rd(self.predictor, self.val)[0]
-            out.append({k: float(scores[k]) for k in ("mAP50", "mAP50_95", "mAP30")})
-        return out
+    def evaluate(self) -> dict:
+        scores = evaluate_rd(self.predictor, self.val)[0]
+        return {k: float(scores[k]) for k in ("mAP50", "mAP50_95", "mAP30")}
+
+    __call__ = score_inherited
 
 
 def subnet_costs(space: SearchSpace, genes: Genes) -> dict:

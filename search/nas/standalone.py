@@ -58,13 +58,14 @@ def choose(records: list[dict], metric: str, top: int, spread: int, spread_by: s
 
 def retrain(space: SearchSpace, chosen: list[dict], run_dir: Path, recipe: str, seed: int = 0,
             backend: str = "local", address: str | None = None, command: str = "",
-            log: Callable[[str], None] = print) -> list[dict]:
+            log: Callable[[str], None] = print, init: str | None = None) -> list[dict]:
     """Train every chosen subnet stand-alone (one search trial each, the family's `recipe`) -> the
-    journal's records of the chosen ones."""
+    journal's records of the chosen ones. `init`: the weights every subnet starts from
+    (search.inherit.describe; the supernet's own start), else the recipe's choice."""
     out = run_dir / SUBDIR
     data = get_recipe(recipe, space.base).data
     trials = [make_trial(space.base, {"label": r["key"], "overrides": space.overrides(from_key(r["key"]))},
-                         recipe, data, seed) for r in chosen]
+                         recipe, data, seed, init=init) for r in chosen]
     atomic.write_json(out / "search.json", {
         "title": f"{space.name}: searched subnets trained stand-alone", "base": space.base, "base_label": None,
         "profile": recipe, "data": data, "seeds": 1, "strategy": "train", "command": command,

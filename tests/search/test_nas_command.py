@@ -1,5 +1,6 @@
-"""`python -m search.nas` end to end on the smoke profile: supernet, constrained search, reports,
-stand-alone retraining of two subnets with the ranking study, registration of the best stand-alone."""
+"""`python -m search.nas` end to end on the smoke profile, for both spaces: supernet, constrained
+search, reports, stand-alone retraining of two subnets with the ranking study, registration of the
+best stand-alone."""
 
 from __future__ import annotations
 
@@ -49,9 +50,40 @@ def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
     assert cfg.name == "smoke_search" and cfg.backbone_width_ratios == tuple(best["choices"][f"backbone{b}"] for b in range(1, 6))
 
 
-def test_nas_command_refuses_a_space_without_a_supernet(tmp_path):
-    with pytest.raises(NotImplementedError, match="dsfec.*supernet is not built"):
-        main(["--space", "dsfec", "--profile", "smoke", "--run-dir", str(tmp_path)])
+def test_dsfec_space_searches_retrains_and_registers(tmp_path, monkeypatch):
+    """The DSFEC width x depth x stem supernet through the same command: searched under a latency
+    limit (a table built here from two measured subnets), retrained stand-alone from the base's
+    leading channels, registered in the DSFEC family's searched.json."""
+    from dsfec_jax.models.dsfec.variants import VARIANTS
+    from dsfec_jax.models.searched import searched_variants
+    from search.nas.latency import LatencyTable
+    from search.nas.spaces import get_space
+    import search.nas.register
+
+    space = get_space("dsfec")
+    run_dir, searched, table = tmp_path / "nas", tmp_path / "searched.json", tmp_path / "latency.json"
+    monkeypatch.setattr(search.nas.register, "DSFEC_SEARCHED", searched)  # never the package's own file
+    # a stand-in table (the real one is measured: python -m search.nas.latency --space dsfec): 10 ms,
+    # 1 ms less for each step down of any width, stem or depth choice
+    LatencyTable("dsfec", 10.0, [[-1.0 * (len(c.options) - 1 - o) for o in range(len(c.options))]
+                                 for c in space.choices]).save(table)
+    assert main(["--space", "dsfec", "--profile", "smoke", "--max-latency-ms", "2", "--latency-table", str(table),
+                 "--run-dir", str(run_dir), "--no-progress", "--register", "dsfec_smoke_search",
+                 "--standalone", "1", "--spread", "1"]) == 0
+    records = [json.loads(line) for line in (run_dir / "journal.jsonl").read_text().splitlines()]
+    assert len(records) >= 6 and all(r["costs"]["latency_ms"] <= 2 and 0 <= r["car_mAP"] <= 100 for r in records)
+    run = json.loads((run_dir / "supernet" / "run.json").read_text())
+    assert run["init"] == "leading slices of the shipped base" and run["config"]["stage_blocks"] == [3, 3, 3, 3]
+    report = (run_dir / "report.md").read_text()
+    assert "26,244 subnets" in report and "car_mAP" in report
+    trained = [json.loads(line) for line in (run_dir / "standalone" / "journal.jsonl").read_text().splitlines()]
+    assert len(trained) == 2 and all(r["status"] == "ok" and r["init"].startswith("leading:dsfec_m.msgpack@")
+                                     for r in trained)
+    study = json.loads((run_dir / "ranking.json").read_text())
+    cfg = searched_variants(searched, VARIANTS)["dsfec_smoke_search"]
+    best = next(r for r in records if r["key"] == study["best_standalone"])
+    assert cfg.stage_blocks == tuple(best["choices"][f"stage{s}_blocks"] for s in range(1, 5))
+    assert cfg.stem_filters == cfg.fec_filters[-1] == best["choices"]["stem_filters"]
 
 
 def test_a_latency_limit_without_a_table_fails_before_training(tmp_path):

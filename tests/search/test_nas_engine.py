@@ -238,3 +238,20 @@ def test_standalone_choice_takes_the_top_and_a_spread_and_the_study_pairs_them()
     assert "Kendall tau between inherited and stand-alone mAP50 over 6 subnets: -0.87" in markdown(study)
     assert "100 s per subnet stand-alone against 10 s one-shot" in markdown(study)
     assert "too few" in markdown(ranking_study(chosen[:1], trained, "mAP50"))
+
+
+def test_a_checked_table_is_scored_on_subnets_its_fit_never_saw():
+    from search.nas.latency import build_checked
+
+    space = toy_space()
+    seen = []
+
+    def interacting(subnets):
+        seen.append(list(subnets))
+        return [5.0 + 0.5 * s[0] * s[1] + s[3] for s in subnets]
+
+    table = build_checked(space, interacting, {"runtime": "toy"}, fit=20, count=6)
+    assert len(seen) == 1  # one interleaved run
+    held_out = [r["subnet"] for r in table.setup["check"]["rows"]]
+    assert held_out and table.setup["fitted_on"] + len(held_out) == len(seen[0])
+    assert table.setup["check"]["max_abs_error_pct"] > 0 and table.setup["runtime"] == "toy"

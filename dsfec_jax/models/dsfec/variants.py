@@ -14,7 +14,13 @@ heads; those choices are written in `notes`.
 
 from __future__ import annotations
 
+from pathlib import Path
+
+from ..searched import searched_variants
 from .net import DSFECConfig
+
+# Subnets found by `python -m search.nas --space dsfec ... --register NAME` (models/searched.py)
+SEARCHED = Path(__file__).parent / "searched.json"
 
 PIXOR_NOTE = "PIXOR widths; neck (192,128,64) to 80x80 (an assumption: the paper gives no neck)"
 
@@ -39,3 +45,5 @@ VARIANTS: dict[str, DSFECConfig] = {
               "(block counts alone cannot reach the paper's size)",
     ),
 }
+
+VARIANTS.update(searched_variants(SEARCHED, VARIANTS))

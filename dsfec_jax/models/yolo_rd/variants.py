@@ -12,6 +12,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+from ..searched import searched_variants as load_searched
 from .config import YoloRDConfig
 
 # Subnets found by the one-shot search (`python -m search.nas ... --register`, search/nas/register.py):
@@ -36,19 +37,7 @@ VARIANTS: dict[str, YoloRDConfig] = {
 
 def searched_variants(path: Path = SEARCHED) -> dict[str, YoloRDConfig]:
     """The searched subnets recorded in `path` as variants (none when it does not exist)."""
-    if not path.exists():
-        return {}
-    try:
-        entries = json.loads(path.read_text())
-        out = {}
-        for name, entry in entries.items():
-            overrides = {k: tuple(v) if isinstance(v, list) else v for k, v in entry["overrides"].items()}
-            note = f"searched subnet of {entry['base']}: {entry['provenance']['command']}"
-            out[name] = dataclasses.replace(VARIANTS[entry["base"]], name=name, notes=note, **overrides)
-        return out
-    except (ValueError, KeyError, TypeError) as err:
-        raise ValueError(f"{path}: expected {{name: {{'base': a yolo_rd variant, 'overrides': {{field: value}}, "
-                         f"'provenance': {{'command': ...}}}}}} ({type(err).__name__}: {err})") from err
+    return load_searched(path, VARIANTS)
 
 
 def representation_variant(backbone_input: str, adapter_input: str | None) -> YoloRDConfig:
