@@ -4,8 +4,10 @@ Point clouds (synthetic, nuscenes-pcd, vod, tj4d): per frame and in total, point
 class, boxes with >= 1 point. Range-Doppler maps (rd-synthetic, ti-adc, raddet, carrada): objects
 per frame by class, box sizes in bins, the noise floor, target peaks above it, the zero-Doppler
 ridge's share of power; the generation rate (rd-synthetic) or the strongest moving target
-(ti-adc); --png DIR writes previews of both input representations. For synthetic sources
---split/--frames/--seed select the frames.
+(ti-adc); --png DIR writes previews of both input representations. Street scenes (street, the
+camera benchmark): objects per frame by class, difficult share, box sizes, depth range, the
+generation rate; --png DIR writes previews (image with boxes | depth | right image). For synthetic
+sources --split/--frames/--seed select the frames.
 """
 
 from __future__ import annotations
@@ -21,19 +23,21 @@ from .rd.colormaps import COLORMAPS
 from .rd.inspect import RD_SOURCES, inspect_rd
 from .rd.stats import format_stats_table
 
+STREET = "street"
+
 
 def parse(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="python -m dsfec_jax.data", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
     i = sub.add_parser("inspect", help="summarise the frames of a data source")
     i.add_argument("target", nargs="?", default="", help="a path (real sources) or a split name (synthetic)")
-    i.add_argument("--source", required=True, choices=SOURCES + RD_SOURCES)
+    i.add_argument("--source", required=True, choices=SOURCES + RD_SOURCES + (STREET,))
     i.add_argument("--split", default=None, help="synthetic split: train, val or test (default val); "
                    "raddet/carrada: a split folder / CARRADA split")
     i.add_argument("--frames", type=positive_int, default=20, help="synthetic: number of frames; RD: samples read")
     i.add_argument("--seed", type=int, default=0)
-    i.add_argument("--png", default=None, metavar="DIR", help="RD sources: write PNG previews here")
-    i.add_argument("--previews", type=non_negative_int, default=3, help="RD sources: number of previews")
+    i.add_argument("--png", default=None, metavar="DIR", help="RD and street sources: write PNG previews here")
+    i.add_argument("--previews", type=non_negative_int, default=3, help="RD and street sources: number of previews")
     i.add_argument("--colormap", default="viridis", choices=COLORMAPS, help="RD sources: the heatmap's colormap")
     i.add_argument("--json", action="store_true")
     return p.parse_args(argv)
@@ -62,12 +66,22 @@ def inspect_maps(args, argv) -> str:
     return "\n".join(lines)
 
 
+def inspect_street(args, argv) -> str:
+    from .camera.street.inspect import format_street, inspect_street as inspect
+    command = "python -m dsfec_jax.data " + shlex.join(sys.argv[1:] if argv is None else argv)
+    summary = inspect(args.split or args.target or None, args.frames, args.seed, args.png, args.previews, command)
+    return json.dumps(summary, indent=2) if args.json else format_street(summary)
+
+
 def main(argv=None) -> int:
     args = parse(argv)
-    if args.source not in ("synthetic", "rd-synthetic") and not args.target:
+    if args.source not in ("synthetic", "rd-synthetic", STREET) and not args.target:
         sys.exit(f"--source {args.source} needs a PATH")
     try:
-        print(inspect_maps(args, argv) if args.source in RD_SOURCES else inspect_points(args))
+        if args.source == STREET:
+            print(inspect_street(args, argv))
+        else:
+            print(inspect_maps(args, argv) if args.source in RD_SOURCES else inspect_points(args))
     except (FileNotFoundError, ValueError) as err:
         sys.exit(str(err))
     return 0

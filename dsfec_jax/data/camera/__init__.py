@@ -1,0 +1,1 @@
+"""Camera images: the PASCAL VOC reader and the embedded street-scene benchmark (street/)."""
