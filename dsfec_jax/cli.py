@@ -6,9 +6,12 @@ thin commands over the library, the same flags for every family.
     dsfec predict --model dsfec_s [--weights PATH] --data tj4d:PATH --split all --out pred.json [--png-dir DIR]
     dsfec train   --model yolov8n [--data synthetic] [--schedule quick] --run-dir runs/v8n
     dsfec predict --model yolov8n --weights runs/v8n/checkpoints/best.msgpack --out dets.json --gt-out gt.json --png-dir png
+    dsfec train   --model shuffle_yolov3 --data street --schedule quick --run-dir runs/sy3 [--steps N]
+    dsfec eval    --model shuffle_yolov3 --weights runs/sy3/checkpoints/best.msgpack --data voc:DIR --split all
 
 Each command asks the model's family what it reads (zoo.family_of(name).modality) and hands
-range-Doppler models to cli_rd, where the RD readings of the shared flags are documented.
+range-Doppler models to cli_rd and camera models to cli_camera, where their readings of the shared
+flags are documented.
 """
 
 from __future__ import annotations
@@ -48,13 +51,17 @@ def common(p: argparse.ArgumentParser, split: str) -> None:
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
     p.add_argument("--data", default="synthetic",
                    help="synthetic (the family's embedded benchmark) | points: synthetic4d | vod:PATH | tj4d:PATH | "
-                        "nuscenes:DATAROOT; range-Doppler: raddet:PATH | carrada:PATH")
+                        "nuscenes:DATAROOT; range-Doppler: raddet:PATH | carrada:PATH; camera: street | street:DIR | "
+                        "voc:DIR")
     p.add_argument("--split", default=split)
     p.add_argument("--frames", type=positive_int, default=None,
                    help="frames (RD models: samples) to use (synthetic: to generate)")
     p.add_argument("--seed", type=int, default=0, help="data seed (synthetic) and init seed (train)")
     p.add_argument("--max-pillars", type=positive_int, default=None,
                    help=f"point models: pillar slots (default {RUN_PILLARS})")
+    p.add_argument("--size", type=positive_int, default=None,
+                   help="camera models: the long side each image is letterboxed to for evaluation and prediction "
+                        "(a multiple of 32; default 416)")
 
 
 def command_line(args) -> str:
@@ -80,6 +87,9 @@ def parse(argv=None) -> argparse.Namespace:
     t.add_argument("--no-augment", action="store_true")
     t.add_argument("--window", type=non_negative_int, default=None,
                    help="point models: train on overlapping WxW-cell windows of the grid (default 96; 0 = the whole grid)")
+    t.add_argument("--sizes", default=None, metavar="LOW,HIGH",
+                   help="camera models: multi-scale input sizes (long side; every multiple of 32 from LOW to HIGH, "
+                        "or one SIZE); default the profile's (quick 320,416; paper 320,608)")
     t.add_argument("--window-sampling", default=None, choices=("cycle", "objects"),
                    help="point models: cycle the windows (default), or favour windows holding a box "
                         "(80 %% of steps; sparse scenes)")
@@ -169,6 +179,11 @@ def is_rd(name: str) -> bool:
     return model_family(name).modality == "rd"
 
 
+def is_camera(name: str) -> bool:
+    """Whether --model reads camera images (its commands are cli_camera's)."""
+    return model_family(name).modality == "image"
+
+
 def checked_overrides(name: str, overrides: dict) -> dict:
     """--set (and the flags that set config fields), validated against the model's config."""
     from . import zoo
@@ -223,6 +238,12 @@ def run_train(args) -> int:
     sched = training_schedule(args, family)
     info = {"command": command_line(args),
             "data": {"source": args.data, "split": args.split}}
+    if family.modality == "image":  # classes come from the data, so the overrides are checked there
+        from . import cli_camera
+        return cli_camera.train(args, parse_overrides(args.set), sched, info)
+    if args.sizes or args.size:
+        sys.exit(f"dsfec train: --sizes and --size apply to camera models; {args.model!r} is a "
+                 f"{family.modality!r} model")
     if family.modality == "rd":
         from . import cli_rd
         return cli_rd.train(args, checked_overrides(args.model, parse_overrides(args.set)), sched, info)
@@ -249,6 +270,11 @@ def run_eval_or_predict(args) -> int:
     from .cli_report import print_scores
     from .evaluate import predict_frames
 
+    if is_camera(args.model):  # classes come from the weights' run, so the overrides are checked there
+        from . import cli_camera
+        return cli_camera.eval_or_predict(args, parse_overrides(args.set))
+    if args.size is not None:
+        sys.exit(f"dsfec {args.command}: --size applies to camera models; {args.model!r} is not one")
     if is_rd(args.model):
         from . import cli_rd
         return cli_rd.eval_or_predict(args, checked_overrides(args.model, parse_overrides(args.set)))
@@ -340,6 +366,9 @@ def run_ship(args) -> int:
     if family.modality == "rd":
         from . import cli_rd
         predictor, variables = cli_rd.ship_predictor(args.model, source, info)
+    elif family.modality == "image":
+        from . import cli_camera
+        predictor, variables = cli_camera.ship_predictor(args.model, source, info)
     else:
         predictor, variables = ship_point_predictor(args.model, source, info)
     measured = {split: measure_benchmark(predictor, family, split, args.frames) for split in ("val", "test")}
@@ -360,6 +389,9 @@ def run_export(args) -> int:
     if is_rd(args.model):
         from . import cli_rd
         return cli_rd.export(args, checked_overrides(args.model, parse_overrides(args.set)), command_line(args))
+    if is_camera(args.model):
+        from . import cli_camera
+        return cli_camera.refuse(args, "ONNX export")
     if args.input_hw:
         sys.exit(f"dsfec export: --input-hw applies to range-Doppler models; {args.model!r} reads point clouds")
     det = zoo.create(args.model, **checked_overrides(args.model, {"max_pillars": args.max_pillars or RUN_PILLARS,
@@ -413,10 +445,23 @@ def bench_threads(text: str) -> list[int]:
 TRAIN_BENCH_FLAGS = ("batch", "window", "max_pillars", "fixed_pillars", "compare", "no_breakdown", "readme")
 
 
-def bench_models(text: str) -> list[str]:
+def no_camera(models: list[str]) -> list[str]:
+    """`models`, or exit naming the camera ones: `dsfec bench` does not time the camera family yet."""
     from . import zoo
 
-    return zoo.available() if text == "all" else [m for m in text.split(",") if m]
+    camera = [m for m in models if m in zoo.REGISTRY and zoo.family_of(m).modality == "image"]
+    if camera:
+        sys.exit(f"dsfec bench: {camera} are camera models; `dsfec bench` does not time the camera family yet")
+    return models
+
+
+def bench_models(text: str) -> list[str]:
+    """--train's models ('all': every registered variant but the camera ones)."""
+    from . import zoo
+
+    if text == "all":
+        return [m for m in zoo.available() if zoo.family_of(m).modality != "image"]
+    return no_camera([m for m in text.split(",") if m])
 
 
 def run_train_bench(args) -> int:
@@ -452,7 +497,7 @@ def run_bench(args) -> int:
     train_only = [f"--{k.replace('_', '-')}" for k in TRAIN_BENCH_FLAGS if getattr(args, k) not in (None, False)]
     if train_only:
         sys.exit(f"dsfec bench: {', '.join(train_only)} need --train")
-    models = [m for m in (args.models or INFER_BENCH_MODELS).split(",") if m]
+    models = no_camera([m for m in (args.models or INFER_BENCH_MODELS).split(",") if m])
     runtimes = [r for r in args.runtimes.split(",") if r]
     bad = [m for m in models if m not in zoo.available()] + [r for r in runtimes if r not in bench.RUNTIMES]
     if bad:

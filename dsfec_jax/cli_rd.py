@@ -40,13 +40,14 @@ POINT_FLAGS = {"window": "--window", "window_sampling": "--window-sampling", "ma
                "top_k": "--top-k"}
 
 
-def refuse_point_flags(args) -> None:
-    """Exit naming every point-cloud flag the user gave to an RD model (their defaults are None)."""
+def refuse_point_flags(args, reads: str = "whole range-Doppler maps") -> None:
+    """Exit naming every point-cloud flag the user gave to a model that `reads` something else (an
+    RD model, a camera model; the flags' defaults are None)."""
     given = [flag for attr, flag in POINT_FLAGS.items() if getattr(args, attr, None) is not None]
     if given:
         sys.exit(f"dsfec {args.command}: {', '.join(given)} "
                  f"{'applies' if len(given) == 1 else 'apply'} to point-cloud models (pillars, BEV windows); "
-                 f"{args.model!r} reads whole range-Doppler maps: drop {'it' if len(given) == 1 else 'them'}")
+                 f"{args.model!r} reads {reads}: drop {'it' if len(given) == 1 else 'them'}")
 
 
 def default_train_samples(data: str) -> int | None:
@@ -105,16 +106,14 @@ def _predictor(args, overrides: dict, score_threshold: float):
 
 def eval_or_predict(args, overrides: dict) -> int:
     """`dsfec eval` / `dsfec predict` of an RD model: COCO mAP@50, @50-95, @30 and DAROD mAP@50."""
-    from .cli_report import print_scores
+    from .cli_report import predict_and_report
 
     refuse_point_flags(args)
     threshold = EVAL_CONF if args.score_threshold is None else args.score_threshold
     samples = _samples(args, args.split, args.frames)  # a bad --data fails before any network is built
     predictor = _predictor(args, overrides, threshold)
-    detections = predictor.predict_samples(samples)
-    if args.command == "predict":
-        write_predictions(args, samples, detections, predictor)
-    return print_scores(args, samples, detections, predictor, "samples", score_threshold=threshold)
+    return predict_and_report(args, samples, predictor, predictor.predict_samples, write_predictions, "samples",
+                              score_threshold=threshold)
 
 
 def write_predictions(args, samples, detections: dict, predictor) -> None:

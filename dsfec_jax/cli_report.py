@@ -22,3 +22,12 @@ def print_scores(args, items, detections: dict, predictor, noun: str, **extra) -
     else:
         print(f"{args.model} on {args.data}/{args.split} ({len(items)} {noun}): {summary}")
     return 0
+
+
+def predict_and_report(args, items, predictor, detect, write, noun: str, **extra) -> int:
+    """`dsfec eval` / `dsfec predict` once the items and the predictor are made: `detect(items)` ->
+    detections, `write(args, items, detections, predictor)` for predict, then the scores printed."""
+    detections = detect(items)
+    if args.command == "predict":
+        write(args, items, detections, predictor)
+    return print_scores(args, items, detections, predictor, noun, **extra)

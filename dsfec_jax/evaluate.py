@@ -182,11 +182,23 @@ def _report_rd_coco(samples, detections, predictor) -> tuple[dict, str]:
     return result, summary(result)
 
 
+def _validate_camera_voc(predictor, images, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
+    from .evaluate_camera import evaluate_camera
+    return evaluate_camera(predictor, images)[0], {}  # no per-image match tables (no bootstrap intervals yet)
+
+
+def _report_camera_voc(images, detections, predictor) -> tuple[dict, str]:
+    from .evaluate_camera import score_images, summary
+    result = {"protocol": "camera_voc", **score_images(images, detections, predictor.classes)}
+    return result, summary(result)
+
+
 # name -> (validate(predictor, frames, match_classes) -> (logged scores, match tables),
 #          report(frames, detections, predictor) -> (the eval command's fields, its one-line summary));
-# the range-Doppler protocol's "frames" are RD samples and its predictor an RD one (predict_rd)
+# the range-Doppler protocol's "frames" are RD samples and its predictor an RD one (predict_rd), the
+# camera protocol's are data.camera CameraImages and a CameraPredictor (predict_camera)
 PROTOCOLS = {"nuscenes": (_validate_nuscenes, _report_nuscenes), "vod": (_validate_vod, _report_vod),
-             "rd_coco": (_validate_rd_coco, _report_rd_coco)}
+             "rd_coco": (_validate_rd_coco, _report_rd_coco), "camera_voc": (_validate_camera_voc, _report_camera_voc)}
 
 
 def _protocol(name: str):
@@ -213,6 +225,9 @@ def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
     if family.modality == "rd":
         from .data.rd.sources import load_rd_samples
         data = load_rd_samples(family.benchmark, split, frames, 0)
+    elif family.modality == "image":
+        from .data.camera.sources import load_camera_images
+        data = load_camera_images(family.benchmark, split, frames, 0)
     else:
         from .data.points.sources import load_frames
         data = load_frames(family.benchmark, split, frames, 0, features=family.input_columns)

@@ -14,24 +14,26 @@ weights, pillarization and box decoding, which models must not import.
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 from typing import Any
 
 import jax
 
+from .models.camera.family import FAMILY as CAMERA
 from .models.dsfec.family import FAMILY as DSFEC
 from .models.family import MODALITIES, Family
 from .models.radarnext.family import FAMILY as RADARNEXT
 from .models.yolo_rd.family import FAMILY as YOLO_RD
 
 # The registry of families: a new family is its folder under models/ plus one entry here.
-FAMILIES: dict[str, Family] = {f.name: f for f in (DSFEC, RADARNEXT, YOLO_RD)}
+FAMILIES: dict[str, Family] = {f.name: f for f in (DSFEC, RADARNEXT, YOLO_RD, CAMERA)}
 REGISTRY: dict[str, Any] = {name: cfg for f in FAMILIES.values() for name, cfg in f.variants.items()}
 
 
 def available(family: str | None = None, modality: str | None = None) -> list[str]:
     """Names of the registered variants, optionally of one family (a key of FAMILIES) or of one
-    modality ('points': the point-cloud families; 'rd': range-Doppler maps)."""
+    modality ('points': the point-cloud families; 'rd': range-Doppler maps; 'image': camera images)."""
     if family is not None and family not in FAMILIES:
         raise KeyError(f"unknown family {family!r}; families: {sorted(FAMILIES)}")
     if modality is not None and modality not in MODALITIES:
@@ -151,20 +153,45 @@ def load_variables(detector: Detector, path: str | Path) -> dict:
                                   **{k: v for k, v in raw.items() if k not in ("params", "batch_stats")}})
 
 
+def trained_fields(path: str | Path, fields) -> dict:
+    """The values of config `fields` in the training record of a weights file: its manifest's
+    "training" (shipped weights, `dsfec ship`), else the run.json of the run directory a checkpoint
+    sits in (RUN/checkpoints/*.msgpack); {} when neither records them."""
+    from .core.checkpoint import manifest_path
+
+    path = Path(path)
+    if not fields:
+        return {}
+    for record, key in ((manifest_path(path), "training"), (path.parent.parent / "run.json", None)):
+        try:
+            info = json.loads(record.read_text())
+        except (OSError, ValueError):
+            continue
+        info = (info.get(key) or {}) if key else info
+        found = {k: v for k, v in (info.get("overrides") or {}).items() if k in fields}
+        if found:
+            return {k: tuple(v) if isinstance(v, list) else v for k, v in found.items()}
+    return {}
+
+
 def load(name: str, /, weights: str | Path | None = None, predictor_options: dict | None = None, **overrides):
     """A ready predictor: `zoo.load("dsfec_s")(points) -> Detections`, `zoo.load("yolov8n")(rd_sample)
-    -> Boxes2D` (shipped weights by default)."""
+    -> Boxes2D`, `zoo.load("shuffle_yolov3")(image) -> Boxes2D` (shipped weights by default)."""
     from .predict import predictor_for
 
-    detector = create(name, **overrides)
     path = Path(weights) if weights else shipped_weights(name)
+    # fields the training data set (the camera family's classes) come from the weights' run unless given
+    detector = create(name, **{**trained_fields(path, family_of(name).weight_fields), **overrides})
     if not path.is_file():
         raise FileNotFoundError(f"no weights at {path}" + ("" if weights else f": {name!r} ships no weights yet; "
                                 f"train with `dsfec train --model {name}` and pass --weights"))
     variables = load_variables(detector, path)
-    if family_of(detector.config).modality == "rd":
+    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    modality = family_of(detector.config).modality
+    if modality == "rd":
         from .predict_rd import RDPredictor
-        return RDPredictor(detector, {"params": variables["params"], "batch_stats": variables["batch_stats"]},
-                           **(predictor_options or {}))
-    return predictor_for(detector, {"params": variables["params"], "batch_stats": variables["batch_stats"]},
-                         **(predictor_options or {}))
+        return RDPredictor(detector, variables, **(predictor_options or {}))
+    if modality == "image":
+        from .predict_camera import CameraPredictor
+        return CameraPredictor(detector, variables, **(predictor_options or {}))
+    return predictor_for(detector, variables, **(predictor_options or {}))

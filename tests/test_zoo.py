@@ -15,13 +15,38 @@ def n_params(detector):
     return sum(int(np.prod(x.shape)) for x in jax.tree.leaves(shapes["params"]))
 
 
+PAPER_DSFEC = ("baseline", "dsfec_l", "dsfec_m", "dsfec_s")
+
+
 def test_available_lists_the_paper_variants():
-    assert zoo.available("dsfec") == ["baseline", "dsfec_l", "dsfec_m", "dsfec_s"]
+    # the paper's four and the NAS-searched subnet registered in dsfec/searched.json
+    assert zoo.available("dsfec") == ["baseline", "dsfec_l", "dsfec_m", "dsfec_s", "dsfec_search"]
     radarnext = [f"radarnext_{n}{d}" for n in ("fpn", "mdfen", "pan") for d in ("", "_dense", "_tj4d")]
     assert zoo.available("radarnext") == radarnext
     assert zoo.available(modality="points") == sorted(zoo.available("dsfec") + radarnext)
-    assert zoo.available() == sorted(zoo.available("dsfec") + radarnext + zoo.available("yolo_rd"))
+    assert zoo.available("camera") == zoo.available(modality="image") == ["shuffle_yolov3", "yolov3_darknet53"]
+    assert zoo.available() == sorted(zoo.available("dsfec") + radarnext + zoo.available("yolo_rd")
+                                     + zoo.available("camera"))
     assert zoo.available(modality="rd") == zoo.available("yolo_rd")
+
+
+def test_the_camera_family_is_a_zoo_family():
+    det = zoo.create("shuffle_yolov3")
+    family = zoo.family_of("shuffle_yolov3")
+    assert family.name == "camera" and family.modality == "image" and family.benchmark == "street"
+    assert family.metric.name == "camera_voc" and family.metric.headline == "mAP50"
+    assert family.schedules == {"quick": "yolo3_quick", "paper": "yolo3_paper"}
+    assert len(det.config.classes) == 20 and det.config.classes[14] == "person"  # VOC by default
+    shapes = jax.eval_shape(det.init, jax.random.key(0))
+    assert n_params(det) == 1_660_353 and set(shapes["params"]) == {"backbone", "head"}
+    outputs = jax.eval_shape(det.apply, shapes, det.dummy_inputs(1))
+    assert [o.shape for o in outputs] == [(1, 416 // s, 416 // s, 3, 25) for s in (8, 16, 32)]
+    street = zoo.create("shuffle_yolov3", num_classes=5, class_names=("car", "truck", "bus", "pedestrian", "cyclist"))
+    assert street.config.classes[3] == "pedestrian" and family.head_classes(street.config)["detect"][4] == "cyclist"
+    with pytest.raises(ValueError, match="class_names"):
+        zoo.create("shuffle_yolov3", class_names=("car", "bus"))  # 2 names for 20 classes
+    with pytest.raises(FileNotFoundError, match="ships no weights"):
+        zoo.load("shuffle_yolov3")
 
 
 @pytest.mark.parametrize("name", sorted(PINNED_PARAMS))
@@ -30,7 +55,7 @@ def test_pinned_param_counts(name):
 
 
 def test_stage_blocks_follow_the_paper():
-    blocks = {n: zoo.config(n).stage_blocks for n in zoo.available("dsfec")}
+    blocks = {n: zoo.config(n).stage_blocks for n in PAPER_DSFEC}
     assert blocks == {"baseline": (3, 6, 6, 3), "dsfec_l": (3, 6, 6, 3), "dsfec_m": (3, 3, 2, 3), "dsfec_s": (1, 1, 3, 2)}
     s = zoo.config("dsfec_s")
     assert (s.act_fec, s.act_stem, s.act_backbone, s.act_car_head, s.act_truck_head, s.act_vru_head) == (

@@ -42,15 +42,18 @@ def eigen_threads() -> int | None:
         return None
 
 
-def pin(threads: int) -> list[int]:
-    """Pin every thread of this process to the first `threads` allowed CPUs -> those CPUs.
-    Threads XLA creates later inherit the pin, so it sizes its pool to `threads`."""
-    cpus = available_cpus()
-    check(threads, cpus)
+def pin(threads: int, cpus: list[int] | None = None) -> list[int]:
+    """Pin every thread of this process to the first `threads` allowed CPUs (or to `cpus`, a
+    chosen set of allowed CPUs: a worker among several on one node) -> those CPUs. Threads XLA
+    creates later inherit the pin, so it sizes its pool to `threads`."""
+    allowed = available_cpus()
+    if cpus is not None and (len(cpus) != threads or not set(cpus) <= set(allowed)):
+        raise ValueError(f"pinning {threads} threads to CPUs {list(cpus)}; this process may use only {allowed}")
+    check(threads, allowed)
     if eigen_threads():
         raise RuntimeError(f"--threads {threads}: XLA's CPU backend has already started with its own thread pool; "
                            "set the thread count before the first jax computation")
-    chosen = cpus[:threads]
+    chosen = list(cpus) if cpus is not None else allowed[:threads]
     for task in TASKS.iterdir():  # sched_setaffinity(0) pins only the calling thread
         try:
             os.sched_setaffinity(int(task.name), chosen)

@@ -74,7 +74,9 @@ class SearchRecipe:
     warm_start: bool = False
 
 
-MODALITIES = ("points", "rd")  # point clouds (pillarized), range-Doppler maps (image-like)
+# point clouds (pillarized); range-Doppler maps (image-like, 2D boxes in map cells); RGB camera
+# images (2D boxes in image pixels: data/camera, predict_camera, evaluate_camera)
+MODALITIES = ("points", "rd", "image")
 # the Family fields that only point-cloud families have (pillars, BEV boxes, rotated NMS)
 POINT_FIELDS = ("input_columns", "targets", "decoder", "predictor", "map_outputs", "head_maps")
 
@@ -84,8 +86,9 @@ class Family:
     """Everything that differs between detector families.
 
     Config and variants: `config_class`, `variants` (name -> frozen config). `modality`: what
-    the family's networks read, 'points' (point clouds, pillarized; DSFEC, RadarNeXt) or 'rd'
-    (range-Doppler maps as images; the YOLO-RD family). Shared code that only handles one
+    the family's networks read, 'points' (point clouds, pillarized; DSFEC, RadarNeXt), 'rd'
+    (range-Doppler maps as images; the YOLO-RD family) or 'image' (RGB camera images; the camera
+    YOLOv3 family). Shared code that only handles one
     modality asks for it (`zoo.require_modality`) and fails with a clear message otherwise.
     Data: `benchmark` (the embedded synthetic source its commands default to).
     Training: `loss(cfg)` -> fn(outputs, targets) -> (loss, parts); `schedules` maps the
@@ -98,9 +101,11 @@ class Family:
     outputs) -> (boxes, scores, labels) before NMS (boxes: 5 BEV or 7 3D columns); `predictor`
     (defaults of the host pipeline: top_k, nms_iou, max_boxes); `map_outputs(cfg)` (names of the
     head maps an export adds) and `head_maps(cfg, outputs)` (those maps, in that order).
-    Deploy: `deploy_config` / `deploy_variables` (the inference form; identity when there is none).
+    Deploy: `deploy_config` / `deploy_variables` (the inference form; identity when there is none);
+    `weight_fields`: config fields a training run sets from its data (the camera family's classes),
+    which `zoo.load` reads back from the weights' training record.
     Measurement: `metric` (MetricProtocol), `stem_memory(cfg, variables)` (a paper's memory
-    convention, or None). Search: `recipes` (name -> SearchRecipe), `axes` (derived search axes:
+    figure in MiB, or None) and `memory_convention` (what that figure counts). Search: `recipes` (name -> SearchRecipe), `axes` (derived search axes:
     name -> fn(base_cfg, overrides, value) -> overrides), `supernet` (or None)."""
 
     name: str
@@ -125,6 +130,8 @@ class Family:
     deploy_config: Callable[[Any], Any] = lambda cfg: cfg
     deploy_variables: Callable[[Any, dict], dict] = lambda cfg, variables: variables
     stem_memory: Callable[[Any, dict], float] | None = None
+    weight_fields: tuple[str, ...] = ()
+    memory_convention: str = "stem input + output maps (float32, batch 1) + stem weights, MiB (DSFEC Table 2)"
 
     def __post_init__(self):
         wrong = [n for n, cfg in self.variants.items() if not isinstance(cfg, self.config_class)]

@@ -2,8 +2,9 @@
 
 Prints one record per model (params, GFLOPs per stage with XLA's count beside it, memory,
 jitted batch-1 latency per stage), for any zoo family: range-Doppler models (yolov8n, ...) are
-profiled on 256 x 64 maps with their own stages (rd.py). --threads must be handled before XLA
-starts (first jax computation).
+profiled on 256 x 64 maps with their own stages (rd.py), camera models (shuffle_yolov3,
+yolov3_darknet53) on 416 x 416 images (stages backbone / head; memory by the Shuffle-YOLOv3
+paper's formula). --threads must be handled before XLA starts (first jax computation).
 """
 
 from __future__ import annotations

@@ -9,7 +9,8 @@ Conventions (stated in every record):
   max_pillars x max_points slots, because the dense tensor is what runs.
 - stages: a point network's top-level modules grouped as `stage_of` groups them (stem,
   stage1..4, neck, heads, pillar_net); a range-Doppler network's (modality 'rd') are its
-  top-level parts as they are: backbone, adapter, neck, head (`part_of`).
+  top-level parts as they are: backbone, adapter, neck, head (`part_of`); so are a camera
+  network's (modality 'image'): backbone, head (the YOLOv3 FPN and its three output convs).
 """
 
 from __future__ import annotations
@@ -40,11 +41,11 @@ def stage_of(path: tuple[str, ...]) -> str:
 
 
 def part_of(path: tuple[str, ...]) -> str:
-    """A range-Doppler network's stage: its top-level part (backbone, adapter, neck, head)."""
+    """A range-Doppler or camera network's stage: its top-level part (backbone, adapter, neck, head)."""
     return path[0] if path else "?"
 
 
-STAGE_NAMES = {"points": stage_of, "rd": part_of}  # modality -> module path -> stage
+STAGE_NAMES = {"points": stage_of, "rd": part_of, "image": part_of}  # modality -> module path -> stage
 
 
 def stage_namer(detector):

@@ -11,7 +11,10 @@ import time
 import jax
 import numpy as np
 
+from .. import zoo
+
 STAGES = ("pillar_net", "backbone", "neck_heads")  # a point network's; a range-Doppler one's: rd.LATENCY_STAGES
+CAMERA_STAGES = ("features", "head")  # a camera network's (models/camera/net.py's stage methods)
 
 
 def timing_variables(detector, seed: int = 0) -> dict:
@@ -38,13 +41,20 @@ def timing_variables(detector, seed: int = 0) -> dict:
 
 def stage_functions(detector, variables, inputs, per_stage: bool = True) -> dict:
     """name -> zero-argument callable that runs that stage (jitted, compiled, blocking);
-    per_stage=False: the whole network only. Range-Doppler models have their own stages (rd.py)."""
+    per_stage=False: the whole network only. Range-Doppler models have their own stages (rd.py),
+    camera models theirs (CAMERA_STAGES: the backbone's features, then the YOLOv3 head on them)."""
     from . import rd
 
     full = jax.jit(detector.apply)
     calls = {"total": lambda: full(variables, inputs)}
-    if per_stage and rd.is_rd(detector):
+    modality = zoo.family_of(detector.config).modality
+    if per_stage and modality == "rd":
         calls.update(rd.stage_functions(detector, variables, inputs))
+    elif per_stage and modality == "image":
+        feats_fn = jax.jit(lambda v, x: detector.apply_method(v, "features", x["image"]))
+        head_fn = jax.jit(lambda v, f: detector.apply_method(v, "head_outputs", f))
+        feats = feats_fn(variables, inputs)
+        calls.update(features=lambda: feats_fn(variables, inputs), head=lambda: head_fn(variables, feats))
     elif per_stage:
         enc = jax.jit(lambda v, x: detector.apply_method(v, "encode", x["points"], x["mask"], x["coords"]))
         bb = jax.jit(lambda v, img: detector.apply_method(v, "backbone", img))

@@ -1,7 +1,9 @@
 """Memory figures.
 
 `paper_memory_mb` is the family's own published convention, where it has one (DSFEC's Table 2:
-the stem's input and output maps plus its weights; models/dsfec/stem_memory.py). `xla_peak_mb` is
+the stem's input and output maps plus its weights, models/dsfec/stem_memory.py; Shuffle-YOLOv3's
+Sec. 3.4: every layer's parameters and output map at 416 x 416, models/camera/footprint.py), named
+by the family's `memory_convention`. `xla_peak_mb` is
 what XLA reserves for temporaries plus arguments and outputs of the compiled network: a fuller,
 less comparable figure.
 """
@@ -21,9 +23,10 @@ def paper_memory_mb(detector, variables) -> float | None:
 
 def convention(detector) -> str:
     """What `memory_mb` of `detector`'s record measures."""
-    if zoo.family_of(detector.config).stem_memory is None:
+    family = zoo.family_of(detector.config)
+    if family.stem_memory is None:
         return "none: the family publishes no memory figure (see xla_peak_mb)"
-    return "stem input + output maps (float32, batch 1) + stem weights, MiB (DSFEC Table 2)"
+    return family.memory_convention
 
 
 def xla_peak_mb(compiled) -> float:

@@ -51,12 +51,18 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     `window_sampling`: how steps pick their training window (data.batches.BatchStream);
     `match_classes` (evaluate.validate's): the headline also carries the last validation's
     "match_tables" (evaluate.score), kept out of the logged metrics. A range-Doppler model
-    (frames and val are then RD samples) trains through train.fit_rd; windows do not apply."""
+    (frames and val are then RD samples) trains through train.fit_rd, a camera model (frames are
+    data.camera CameraImages) through train.fit_camera; windows do not apply to either."""
     _check_counts({"training frames": len(frames), "validation frames": len(val), "steps": steps})
-    if zoo.family_of(zoo.config(model, **overrides)).modality == "rd":  # frames are RD samples
+    modality = zoo.family_of(zoo.config(model, **overrides)).modality
+    if modality == "rd":  # frames are RD samples
         from .fit_rd import fit_rd
         return fit_rd(model, overrides, frames, val, schedule, run_dir, seed, steps, augment, eval_every, run_info,
                       progress, init_variables, match_classes=match_classes)
+    if modality == "image":  # frames are camera images; the camera protocol keeps no match tables
+        from .fit_camera import fit_camera
+        return fit_camera(model, overrides, frames, val, schedule, run_dir, seed, steps, augment, eval_every,
+                          run_info, progress, init_variables)
     det = zoo.create(model, **overrides)
     cfg = det.config
     family = zoo.family_of(cfg)

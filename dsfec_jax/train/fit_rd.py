@@ -14,14 +14,14 @@ from pathlib import Path
 from typing import Sequence
 
 from .. import zoo
-from ..core.provenance import jsonable, versions
+from ..core.provenance import jsonable
 from ..data.rd.augment import RDAugment
 from ..data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
 from ..data.rd.representations import RDRepresentation
 from ..data.rd.sample import RDSample
 from ..evaluate import validate as run_validation
 from ..predict_rd import RDPredictor
-from .loop import RunSpec, train
+from .loop import RunSpec, run_record, train
 from .schedules import Schedule
 
 
@@ -39,12 +39,9 @@ def fit_rd(model: str, overrides: dict, samples: Sequence[RDSample], val: Sequen
                            det.config.classes, max_boxes)
     total = steps or schedule.total_steps(len(samples))
     spec = RunSpec(Path(run_dir), schedule, seed, total_steps=total, progress=progress)
-    info = {**(run_info or {}), "model": model, "overrides": jsonable(overrides),
-            "config": jsonable(dataclasses.asdict(det.config)), "schedule": jsonable(dataclasses.asdict(schedule)),
-            "seed": seed, "steps": total, "train_samples": len(samples), "val_samples": len(val),
-            "augment": jsonable(dataclasses.asdict(stream.augment)) if stream.augment else None,
-            "representation": jsonable(dataclasses.asdict(representation)), "max_boxes": max_boxes,
-            "versions": versions()}
+    info = run_record(run_info, model, overrides, det.config, schedule, seed, total, stream.augment,
+                      train_samples=len(samples), val_samples=len(val),
+                      representation=jsonable(dataclasses.asdict(representation)), max_boxes=max_boxes)
 
     last_tables = {}  # the match tables of the latest validation, which the returned scores are
 

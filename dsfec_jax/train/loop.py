@@ -33,6 +33,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..core import atomic, checkpoint
+from ..core.provenance import jsonable, versions
 from ..data.batches import BatchStream
 from ..data.prefetch import Prefetcher
 from .loss_watch import LossWatch, NonFiniteLoss
@@ -66,6 +67,18 @@ class RunSpec:
     ckpt_every: int = 100
     keep: int = 3
     progress: bool = True
+
+
+def run_record(run_info: dict | None, model: str, overrides: dict, config, schedule: Schedule, seed: int,
+               steps: int, augment, **fields) -> dict:
+    """run.json's content for a fit: the caller's `run_info` (command, data), the model, its
+    overrides and whole config, the schedule, seed and length, the augmentation settings (a
+    dataclass, or None for none), the fit's own `fields` and the versions."""
+    return {**(run_info or {}), "model": model, "overrides": jsonable(overrides),
+            "config": jsonable(dataclasses.asdict(config)), "schedule": jsonable(dataclasses.asdict(schedule)),
+            "seed": seed, "steps": steps, **fields,
+            "augment": jsonable(dataclasses.asdict(augment)) if augment is not None else None,
+            "versions": versions()}
 
 
 def checkpoints(run_dir: Path) -> list[Path]:
@@ -178,15 +191,19 @@ def _save(spec: RunSpec, state: dict, step: int, extra: dict) -> None:
 def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
           evaluate: Callable[[dict], dict] | None = None, eval_every: int | None = None,
           best_key: str = "car_mAP", window_detectors: list | None = None,
-          init_variables: dict | None = None) -> tuple[dict, dict | None]:
+          init_variables: dict | None = None,
+          before_eval: Callable[[dict], dict] | None = None) -> tuple[dict, dict | None]:
     """Train (or resume) in spec.run_dir -> (final state, last evaluation or None).
-    `evaluate(state) -> metrics` runs every `eval_every` steps and at the end.
+    `evaluate(state) -> metrics` runs every `eval_every` steps and at the end; `before_eval(state)
+    -> state` (e.g. train.precise_bn) runs just before it, and its state is the one evaluated,
+    saved and trained on (a deterministic function of the state: resumes stay exact).
     `window_detectors[i]` (same weights, grid = the stream's window i) trains on window i.
     `init_variables` (trained variables of this or a related network) seed a fresh run module by
     module (see warm_start); a resumed run ignores them."""
     spec.run_dir.mkdir(parents=True, exist_ok=True)
     previous = _started_with(spec.run_dir, run_info, type(detector.config))
-    tx = optimizer(spec.schedule, spec.total_steps)
+    # a detector may bring its own optimizer (a sandwich-sampled supernet accumulates over its cycle)
+    tx = (detector.optimizer if hasattr(detector, "optimizer") else optimizer)(spec.schedule, spec.total_steps)
     state = _restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed), init_variables))
     start = int(state["step"])
     _record_start(spec.run_dir, run_info, previous, start)
@@ -221,6 +238,8 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                 log.write(json.dumps(row) + "\n")
                 log.flush()
             if eval_step:
+                if before_eval is not None:
+                    state = before_eval(state)
                 scores = evaluate(state)
                 log.write(json.dumps({"step": done, "eval": scores}) + "\n")
                 log.flush()

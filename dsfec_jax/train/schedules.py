@@ -15,6 +15,22 @@ step) for 15 epochs over ~1000 synthetic 256x64 samples: 15 x 62 batches x 16 = 
 minutes at 20 frames/s (9.9 at 25, 16.5 at 15) on the 2-core CPU. Measured there (shared, load ~3),
 after compiling: YOLOv8n-Adapter ~22 frames/s (~11 min), YOLOv8n ~44 frames/s (~6 min).
 
+`yolo3_paper` (optimizer "darknet") is pjreddie/darknet cfg/yolov3-voc.cfg, the schedule the
+Shuffle-YOLOv3 paper trained with on one GPU: batch 64 (darknet's subdivisions=16 only split it
+into 4-image passes, the update is per 64), SGD with momentum 0.9, learning rate 0.001 with
+darknet's burn_in (lr (step / 1000)^4 over the first 1000 batches, src/network.c
+get_current_rate, power 4), max_batches 50200, policy steps x0.1 at 40000 and 45000 (kept as
+fractions of the run, so --steps stretches them), weight decay 5e-4 on the conv kernels only
+(darknet's update_convolutional_layer decays the weights, not biases or BN scales), coupled
+(added to the gradient, as darknet's axpy(-decay * batch, weights, updates) does), no gradient
+clipping. `yolo3_quick` is sized for the 2-core CPU: AdamW 1e-3, decoupled decay 5e-4 (SGD at
+0.001 barely moves a from-scratch network in a few hundred steps), 30 warm-up steps, batch 8,
+200 steps, x0.1 at 2/3 and 8/9; train/fit_camera pairs it with multi-scale 320-416 (darknet's is
+320-608). Shuffle-YOLOv3 on one core of this CPU: 1.6 s a step at 320 x 192 with the core to itself,
+~50 s to compile each of the 4 sizes (36 s more for init): about 12 minutes; measured with a second
+process on the same core, 22.4 minutes wall (10.8 CPU-minutes) for the 200 steps, 500 frames made and
+100 validated.
+
 The recipe decays per epoch: its epochs come from `epochs`, and steps_per_epoch =
 max(total_steps // epochs, 1), so a `--steps` override stretches or shrinks every epoch rather than
 cutting the schedule off. A step-based sgd schedule (one with `steps`) must give `epochs` as well.
@@ -24,11 +40,13 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax
+import jax.numpy as jnp
 import optax
 
 from .sgd_recipe import SGDRecipe, learning_rates, make_recipe, ultralytics_sgd
 
-OPTIMIZERS = ("adamw", "sgd")
+OPTIMIZERS = ("adamw", "sgd", "darknet")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,7 +64,7 @@ class Schedule:
     clip_norm: float = 10.0
     optimizer: str = "adamw"           # "sgd": the ultralytics recipe (sgd_recipe); warmup_steps is then
                                        # the least number of warm-up batches (ultralytics: 100)
-    momentum: float = 0.937            # sgd only, from here on
+    momentum: float = 0.937            # sgd and darknet; the rest sgd only
     warmup_momentum: float = 0.8
     warmup_bias_lr: float = 0.1
     warmup_epochs: float = 3.0
@@ -74,6 +92,10 @@ SCHEDULES = {
     # ultralytics/cfg/default.yaml hyperparameters with the SGD the issue names (default.yaml says "auto")
     "yolo_paper": Schedule("yolo_paper", 0.01, 100, 64, epochs=300, optimizer="sgd", weight_decay=5e-4),
     "yolo_quick": Schedule("yolo_quick", 0.01, 100, 16, epochs=15, optimizer="sgd", weight_decay=5e-4),
+    # darknet's yolov3-voc.cfg (the camera family's paper profile) and its CPU-sized counterpart
+    "yolo3_paper": Schedule("yolo3_paper", 0.001, 1000, 64, steps=50200, decay_at=(40000 / 50200, 45000 / 50200),
+                            weight_decay=5e-4, optimizer="darknet", momentum=0.9),
+    "yolo3_quick": Schedule("yolo3_quick", 0.001, 30, 8, steps=200, weight_decay=5e-4),
 }
 
 
@@ -94,22 +116,41 @@ def recipe_for(s: Schedule, total_steps: int) -> SGDRecipe:
                        nominal_batch=s.nominal_batch, weight_decay=s.weight_decay, clip_norm=s.clip_norm)
 
 
+DARKNET_BURN_IN_POWER = 4  # src/network.c get_current_rate: rate * pow(batch / burn_in, power), power 4
+
+
 def learning_rate(s: Schedule, total_steps: int) -> optax.Schedule:
-    """Linear warm-up, then piecewise-constant decay at the given fractions of training. For an sgd
-    schedule: the decayed weights' lr per batch (sgd_recipe.learning_rates has every group's)."""
+    """Linear warm-up (darknet: burn-in (step / warmup)^4), then piecewise-constant decay at the
+    given fractions of training. For an sgd schedule: the decayed weights' lr per batch
+    (sgd_recipe.learning_rates has every group's)."""
     if s.optimizer == "sgd":
         recipe = recipe_for(s, total_steps)
         return lambda step: learning_rates(recipe, step)["weight"]
-    warmup = optax.linear_schedule(s.learning_rate / 100, s.learning_rate, max(s.warmup_steps, 1))
+    if s.optimizer == "darknet":
+        burn_in = max(s.warmup_steps, 1)
+
+        def warmup(step):
+            return s.learning_rate * (jnp.minimum(step, burn_in) / burn_in) ** DARKNET_BURN_IN_POWER
+    else:
+        warmup = optax.linear_schedule(s.learning_rate / 100, s.learning_rate, max(s.warmup_steps, 1))
     boundaries = {max(int(f * total_steps) - s.warmup_steps, 1): s.decay_factor for f in s.decay_at}
     constant = optax.piecewise_constant_schedule(s.learning_rate, boundaries)
     return optax.join_schedules([warmup, constant], [s.warmup_steps])
+
+
+def conv_kernels(params) -> dict:
+    """True for the leaves darknet decays: conv kernels (named 'kernel', 2 or more axes)."""
+    return jax.tree_util.tree_map_with_path(
+        lambda path, leaf: getattr(path[-1], "key", None) == "kernel" and leaf.ndim >= 2, params)
 
 
 def optimizer(s: Schedule, total_steps: int) -> optax.GradientTransformation:
     """The schedule's optimizer, called once per batch (sgd accumulates batches inside)."""
     if s.optimizer == "sgd":
         return ultralytics_sgd(recipe_for(s, total_steps))
+    if s.optimizer == "darknet":  # coupled decay on the kernels, then heavy-ball momentum; no clipping
+        return optax.chain(optax.add_decayed_weights(s.weight_decay, mask=conv_kernels),
+                           optax.sgd(learning_rate(s, total_steps), momentum=s.momentum))
     return optax.chain(
         optax.clip_by_global_norm(s.clip_norm),
         optax.adamw(learning_rate(s, total_steps), b1=s.b1, weight_decay=s.weight_decay),

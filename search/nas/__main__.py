@@ -1,8 +1,8 @@
 """One-shot NAS: python -m search.nas --space yolov8n_adapter [--profile smoke|quick|paper]
     [--strategy evolution|nsga2] [--max-params 2.65e6] [--max-gflops G] [--max-latency-ms MS]
     [--latency-table FILE] [--objective params|gflops|latency_ms]
-    [--seed 0] [--run-dir runs/nas/SPACE] [--standalone 5] [--spread 3]
-    [--spread-by score|params|gflops|latency_ms] [--backend local|ray]
+    [--seed 0] [--sampling uniform|sandwich] [--run-dir runs/nas/SPACE] [--standalone 5] [--spread 3]
+    [--spread-by score|params|gflops|latency_ms] [--backend local|ray [--address ADDR] [--workers N]]
     [--register yolov8n_adapter_search]
 
 Trains the space's weight-sharing supernet by SPOS (resumable), searches it under the limits
@@ -11,7 +11,9 @@ table, the top subnets and Pareto plots (pareto_params.png, pareto_gflops.png). 
 trains the top K subnets from scratch (and --spread N more across the ranking) with the family's
 recipe, in RUN_DIR/standalone, and adds the ranking study (Kendall tau, inherited against
 stand-alone mAP) to the report and RUN_DIR/ranking.json; --register then takes the best
-stand-alone subnet. Run the same command again to resume a killed run.
+stand-alone subnet. --backend ray scores each generation's subnets on N Ray actors (the supernet
+still trains here first) and runs the stand-alone trainings as Ray Tune trials. Run the same
+command again to resume a killed run.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import sys
 
 from .run import PROFILES, run_nas
 from .spaces import SPACES
+from .spos import SAMPLINGS
 
 
 def main(argv=None) -> int:
@@ -39,6 +42,9 @@ def main(argv=None) -> int:
     p.add_argument("--objective", default="params", choices=("params", "gflops", "latency_ms"),
                    help="NSGA-II's cost objective")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sampling", default="uniform", choices=SAMPLINGS,
+                   help="SPOS's subnet per batch: uniform, or the sandwich rule (largest, smallest, 2 uniform, "
+                        "accumulated into one update; DSFEC-style spaces); kept in RUN_DIR/supernet/run.json")
     p.add_argument("--run-dir", default=None)
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--register", default=None, metavar="NAME",
@@ -50,18 +56,24 @@ def main(argv=None) -> int:
     p.add_argument("--spread-by", default="score", choices=("score", "params", "gflops", "latency_ms"),
                    help="space the --spread subnets over the inherited ranking or over a cost's range")
     p.add_argument("--backend", default="local", choices=("local", "ray"),
-                   help="stand-alone trainings here, or as Ray Tune trials")
+                   help="score subnets and train the stand-alone ones here, or on Ray (scoring actors, Tune trials)")
     p.add_argument("--address", default=None, help="with --backend ray: an existing cluster")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="with --backend ray: scoring actors, 1 CPU each (default: the cluster's CPUs, "
+                        "at most the population)")
     args = p.parse_args(argv)
     if args.standalone < 0 or args.spread < 0:
         p.error("--standalone and --spread take counts >= 0")
+    if args.workers is not None and (args.backend != "ray" or args.workers < 1):
+        p.error("--workers N (N >= 1) goes with --backend ray")
     limits = {k: v for k, v in (("params", args.max_params), ("gflops", args.max_gflops),
                                 ("latency_ms", args.max_latency_ms)) if v is not None}
     run_dir = args.run_dir or f"runs/nas/{args.space}_{args.profile}_{args.strategy}"
     report = run_nas(args.space, run_dir, args.profile, args.strategy, limits, args.seed, args.objective,
                      command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress,
                      register_as=args.register, latency_path=args.latency_table, standalone=args.standalone,
-                     spread=args.spread, spread_by=args.spread_by, backend=args.backend, address=args.address)
+                     spread=args.spread, spread_by=args.spread_by, backend=args.backend, address=args.address,
+                     workers=args.workers, sampling=args.sampling)
     print(f"report: {report}")
     return 0
 

@@ -15,13 +15,28 @@ COST_LABELS = {"params": "params (M, BN-folded)", "gflops": "GFLOPs (2 x MAC, ba
                "latency_ms": "latency (ms, the table's prediction)"}
 
 
+def cost_cells(costs: dict) -> str:
+    """params (M) | GFLOPs | latency (ms, '-' where no latency table was used)."""
+    latency = costs.get("latency_ms")
+    return (f"{costs['params'] / 1e6:.3f} | {costs['gflops']:.3f} | "
+            f"{'-' if latency is None else f'{latency:.1f}'}")
+
+
 def top_table(records: list[dict], metric: str, k: int = 5) -> str:
     best = sorted(records, key=lambda r: (-r[metric], r["key"]))[:k]
-    lines = [f"| rank | subnet | {metric} | params (M) | GFLOPs | choices |", "|---|---|---|---|---|---|"]
+    lines = [f"| rank | subnet | {metric} | params (M) | GFLOPs | latency (ms) | choices |", "|---|---|---|---|---|---|---|"]
     for i, r in enumerate(best, 1):
         choices = ", ".join(f"{n}={v}" for n, v in r["choices"].items())
-        lines.append(f"| {i} | {r['key']} | {r[metric]:.2f} | {r['costs']['params'] / 1e6:.3f} | "
-                     f"{r['costs']['gflops']:.3f} | {choices} |")
+        lines.append(f"| {i} | {r['key']} | {r[metric]:.2f} | {cost_cells(r['costs'])} | {choices} |")
+    return "\n".join(lines)
+
+
+def reference_table(references: list[dict], metric: str) -> str:
+    """The hand-designed reference points of the Pareto plots as a table (inherited or shipped
+    scores, as each label says)."""
+    lines = [f"| reference | {metric} | params (M) | GFLOPs | latency (ms) |", "|---|---|---|---|---|"]
+    for ref in references:
+        lines.append(f"| {ref['label']} | {ref[metric]:.2f} | {cost_cells(ref)} |")
     return "\n".join(lines)
 
 
@@ -61,7 +76,9 @@ def write_report(run_dir: Path, header: str, progress: str, records: list[dict],
         plot_pareto(records, cost, metric, run_dir / f"pareto_{cost}.png", f"{meta['space']}: {metric} vs {cost}",
                     references)
     text = "\n\n".join([header, "## Generations", progress, "## Top subnets (inherited weights)",
-                        top_table(records, metric), "Pareto plots: " + ", ".join(f"`pareto_{c}.png`" for c in costs) + ".",
+                        top_table(records, metric),
+                        *(["## Hand-designed reference points", reference_table(references, metric)] if references else []),
+                        "Pareto plots: " + ", ".join(f"`pareto_{c}.png`" for c in costs) + ".",
                         *(["## Stand-alone retraining and the ranking study", standalone] if standalone else []),
                         "## Provenance", "```json\n" + json.dumps(meta, indent=1) + "\n```", ""])
     path = run_dir / "report.md"

@@ -8,6 +8,7 @@ run started again with the same command picks up where it stopped.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import time
@@ -26,7 +27,7 @@ from .evolution import Evolution, EvolutionSettings, progress_table
 from .latency import RECORDS, LatencyTable
 from .register import register
 from .report import write_report
-from .space import SearchSpace
+from .space import SearchSpace, key
 from .spaces import get_space
 from .spos import SubnetScorer, model_costs, subnet_costs, train_supernet
 from .standalone import choose, ranking_study, retrain
@@ -97,13 +98,16 @@ def shipped_reference(model: str) -> dict | None:
     return {"label": f"{model} (stand-alone, shipped)", **costs, **{k: val.get(k) for k in ("mAP50", "mAP50_95")}}
 
 
-def supernet(space: SearchSpace, p: NasProfile, run_dir: Path, seed: int = 0, progress: bool = True):
+def supernet(space: SearchSpace, p: NasProfile, run_dir: Path, seed: int = 0, progress: bool = True,
+             load_only: bool = False):
     """The profile's training maps, SPOS step count and (detector, subnet inputs, state) of the run's
-    supernet: trained, or resumed from RUN_DIR/supernet (nothing trains once it is finished)."""
+    supernet: trained, or resumed from RUN_DIR/supernet (nothing trains once it is finished);
+    `load_only`: the finished supernet read from its last checkpoint, nothing trained or written."""
     train = load_rd_samples("synthetic", "train", p.train_samples)
     schedule = get_schedule(p.schedule, batch_size=p.batch_size)
     steps = p.supernet_steps or schedule.total_steps(len(train))
-    return train, steps, train_supernet(space, train, schedule, run_dir / "supernet", steps, seed, progress)
+    return train, steps, train_supernet(space, train, schedule, run_dir / "supernet", steps, seed, progress,
+                                        load_only=load_only)
 
 
 @dataclasses.dataclass
@@ -119,15 +123,22 @@ class Engine:
     init: str | None = None  # what the supernet started from, given to the stand-alone retraining too
 
 
-def rd_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path, seed: int, progress: bool) -> Engine:
+# An engine function: (space, profile, profile name, run dir, seed, progress, load_only=False) -> Engine.
+# load_only (Ray scoring actors, search.nas.ray_scoring): the same scorer over the supernet the
+# driver finished, read from RUN_DIR/supernet's last checkpoint; nothing trains or writes.
+def rd_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path, seed: int, progress: bool,
+              load_only: bool = False, sampling: str = "uniform") -> Engine:
+    if sampling != "uniform":
+        raise ValueError(f"--sampling {sampling}: the RD supernet trains with uniform sampling only (sandwich: DSFEC-style spaces)")
     val = load_rd_samples("synthetic", "val", p.val_samples)
-    train, steps, (det, subnet_inputs, state) = supernet(space, p, run_dir, seed, progress)
+    train, steps, (det, subnet_inputs, state) = supernet(space, p, run_dir, seed, progress, load_only)
     scorer = SubnetScorer(det, subnet_inputs, state, train, val, seed, p.calibration_batches, p.batch_size)
     return Engine(steps, scorer, "mAP50", f"synthetic RD benchmark, {len(val)} val maps",
                   f"{p.calibration_batches} batches of {p.batch_size} maps")
 
 
-def point_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path, seed: int, progress: bool) -> Engine:
+def point_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path, seed: int, progress: bool,
+                 load_only: bool = False, sampling: str = "uniform") -> Engine:
     """DSFEC-style families: the family's search recipe of the same name sets the data, grid and
     batch (search.recipes); the NAS profile the SPOS steps and the calibration frames (as many
     as the RD profile's)."""
@@ -141,7 +152,8 @@ def point_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path,
     val = load_frames(recipe.data, "val", recipe.val_frames, seed=0, features=family.input_columns)
     steps = p.supernet_steps or recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
     det, validator, subnet_inputs, state, stream = train_point_supernet(space, recipe, frames, run_dir / "supernet",
-                                                                       steps, seed, progress)
+                                                                       steps, seed, progress, load_only=load_only,
+                                                                       sampling=sampling)
     batch = recipe.schedule.batch_size
     calibration = max(1, p.calibration_batches * p.batch_size // batch)
     scorer = PointSubnetScorer(det, validator, subnet_inputs, state, stream, val, calibration)
@@ -159,38 +171,50 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
             limits: dict | None = None, seed: int = 0, objective: str = "params", command: str = "",
             progress: bool = True, register_as: str | None = None, latency_path: str | None = None,
             standalone: int = 0, spread: int = 0, spread_by: str = "score", backend: str = "local",
-            address: str | None = None,
+            address: str | None = None, workers: int | None = None, sampling: str = "uniform",
             log: Callable[[str], None] = print) -> Path:
     """Supernet, search, reports; with `standalone` / `spread`, the top subnets (and `spread` more
     across the ranking) trained stand-alone and the ranking study (search.nas.standalone); `register_as`
-    then registers the best stand-alone subnet instead of the best inherited one."""
+    then registers the best stand-alone subnet instead of the best inherited one. `backend` "ray":
+    the search's subnets are scored by `workers` Ray actors (search.nas.ray_scoring; the local Ray
+    started here or the cluster at `address`) and the stand-alone trainings run as Ray Tune trials."""
+    if strategy not in ("evolution", "nsga2"):
+        raise ValueError(f"--strategy {strategy!r}; expected 'evolution' or 'nsga2'")
     space = get_space(space_name)
     p, run_dir, limits = PROFILES[profile], Path(run_dir), dict(limits or {})
     table = latency_table(space, latency_path, "latency_ms" in limits)  # before anything trains
     t0 = time.perf_counter()
-    engine = engine_for(space)(space, p, profile, run_dir, seed, progress)
-    steps, scorer, metric = engine.steps, engine.scorer, engine.metric
+    # the supernet trains here, in the driver; `sampling`: SPOS's rule (spos.SAMPLINGS), kept in its run.json
+    engine = engine_for(space)(space, p, profile, run_dir, seed, progress,
+                               **({"sampling": sampling} if sampling != "uniform" else {}))
+    steps, metric = engine.steps, engine.metric
     log(f"supernet: {steps} SPOS steps ({time.perf_counter() - t0:.0f} s including any earlier part of this run)")
     costs = CachedCosts(space, table)
-    if strategy == "evolution":
-        settings = EvolutionSettings(p.population, p.generations, p.top_k, metric=metric, seed=seed)
-        progress_text = progress_table(Evolution(space, scorer, costs, run_dir, settings, limits, log).run())
-    elif strategy == "nsga2":
-        from .nsga import pareto_front, run_nsga2
+    with contextlib.ExitStack() as stack:
+        scorer = engine.scorer
+        if backend == "ray":
+            from .ray_scoring import RayScorer, nas_factory
 
-        study = run_nsga2(space, scorer, costs, run_dir, objective, limits, p.population, p.generations, metric, seed, log)
-        progress_text = f"NSGA-II, {len(study.trials)} trials; Pareto front ({metric} vs {objective}): " + ", ".join(
-            f"{r['key']} ({r['score']:.2f}, {r['cost']:.4g})" for r in pareto_front(study))
-    else:
-        raise ValueError(f"--strategy {strategy!r}; expected 'evolution' or 'nsga2'")
-    records = [r for r in Journal(run_dir).records() if r.get("status") == "ok"]
+            scorer = stack.enter_context(RayScorer(nas_factory(space.name, p, profile, run_dir, seed), workers, address,
+                                                   max_workers=p.population, log=log))
+        if strategy == "evolution":
+            settings = EvolutionSettings(p.population, p.generations, p.top_k, metric=metric, seed=seed)
+            progress_text = progress_table(Evolution(space, scorer, costs, run_dir, settings, limits, log).run())
+        else:
+            from .nsga import pareto_front, run_nsga2
+
+            study = run_nsga2(space, scorer, costs, run_dir, objective, limits, p.population, p.generations, metric,
+                              seed, log)
+            progress_text = f"NSGA-II, {len(study.trials)} trials; Pareto front ({metric} vs {objective}): " + ", ".join(
+                f"{r['key']} ({r['score']:.2f}, {r['cost']:.4g})" for r in pareto_front(study))
     oneshot_s = _oneshot_seconds(run_dir, time.perf_counter() - t0)
-    hand = space.base_genes()
-    references = [{"label": f"{space.base} (inherited)", **costs(hand), **scorer([hand])[0]}]
+    hand = space.base_genes()  # one subnet, scored here (a resumed finished search then starts no Ray)
+    references = [{"label": f"{space.base} (inherited)", **costs(hand), **engine.scorer([hand])[0]}]
+    records = [r for r in Journal(run_dir).records() if r.get("status") == "ok"]
     if zoo.family_of(space.base).modality == "rd":  # shipped manifests score the same val maps
         references += [r for r in (shipped_reference(m) for m in ("yolov8n", space.base)) if r]
     meta = {"command": command, "space": space.name, "space_size": space.size(), "profile": profile,
-            "strategy": strategy, "limits": limits, "seed": seed, "supernet_steps": steps,
+            "strategy": strategy, "limits": limits, "seed": seed, "supernet_steps": steps, "sampling": sampling,
             "wall_s": round(time.perf_counter() - t0, 1), "environment": environment()}
     header = (f"# One-shot NAS: {space.name} ({space.description}; {space.size():,} subnets)\n\n"
               f"Profile `{profile}` on the {engine.data}: {steps} SPOS steps, {len(records)} subnets scored with "
@@ -200,8 +224,11 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
     if standalone or spread:
         chosen = choose(records, metric, standalone, spread, spread_by)
         log(f"stand-alone: training {len(chosen)} subnets ({standalone} top, {len(chosen) - min(standalone, len(chosen))} "
-            f"across the ranking) in {run_dir / 'standalone'}")
-        trained = retrain(space, chosen, run_dir, profile, seed, backend, address, command, log, engine.init)
+            f"across the ranking, and {space.base}'s own architecture as the reference) in {run_dir / 'standalone'}")
+        # the hand-designed architecture trained the same way: the reference the searched ones face
+        extra = [] if any(r["key"] == key(hand) for r in chosen) else [{"key": key(hand)}]
+        trained = retrain(space, chosen + extra, run_dir, profile, seed, backend, address, command, log, engine.init)
+        references += standalone_reference(space.base, hand, trained, costs, metric)
         study = ranking_study(chosen, trained, metric, oneshot_s, len(records))
         atomic.write_json(run_dir / "ranking.json", study)
         meta["wall_s"] = round(time.perf_counter() - t0, 1)
@@ -212,17 +239,27 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
     return report
 
 
+def standalone_reference(base: str, hand, trained: list[dict], costs, metric: str) -> list[dict]:
+    """The hand-designed architecture's stand-alone point among `trained` ([] if it failed)."""
+    done = [r for r in trained if r["label"] == key(hand) and r.get("status") == "ok"]
+    return [{"label": f"{base} (stand-alone, this recipe)", **costs(hand), metric: done[0]["metrics"][metric]}] if done else []
+
+
 def _oneshot_seconds(run_dir: Path, this_process_s: float) -> float:
-    """The one-shot part's wall time (supernet + search), kept in RUN_DIR/timing.json: the process
-    that finishes the search adds its time to what earlier ones recorded, later ones add nothing,
-    so the stand-alone cost ratio compares against the whole one-shot cost (a process killed
-    before the search's end records nothing, which makes the figure a lower bound)."""
-    path = run_dir / "timing.json"
-    timing = json.loads(path.read_text()) if path.exists() else {"oneshot_s": 0.0, "complete": False}
+    """The one-shot part's wall time (supernet + search), kept in RUN_DIR/timing.json, so the
+    stand-alone cost ratio compares against the whole one-shot cost (accumulated_seconds)."""
+    return accumulated_seconds(run_dir / "timing.json", "oneshot_s", this_process_s)
+
+
+def accumulated_seconds(path: Path, field: str, this_process_s: float) -> float:
+    """A resumable job's wall time kept in `path`: the process that finishes the job adds its time
+    to what earlier ones recorded, later ones (which find it finished) add nothing; a process killed
+    before the end records nothing, which makes the figure a lower bound."""
+    timing = json.loads(path.read_text()) if path.exists() else {field: 0.0, "complete": False}
     if not timing.get("complete"):
-        timing = {**timing, "oneshot_s": round(timing["oneshot_s"] + this_process_s, 1), "complete": True}
+        timing = {**timing, field: round(timing[field] + this_process_s, 1), "complete": True}
         atomic.write_json(path, timing)
-    return float(timing["oneshot_s"])
+    return float(timing[field])
 
 
 def _register_best(space: SearchSpace, records: list[dict], study: dict | None, metric: str, name: str, meta: dict,

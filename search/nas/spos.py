@@ -5,7 +5,11 @@
   checkpoints and compiled step serve it unchanged (one compile for every subnet).
 - `SPOSStream` draws batch s's subnet uniformly from `default_rng([seed, SALT, s])`: like the
   batch itself, a pure function of (seed, s), so a resumed supernet run trains what an
-  uninterrupted one trains.
+  uninterrupted one trains. `sampling="sandwich"` (BigNAS / US-Nets' sandwich rule): batch s
+  trains SANDWICH[s % 4] (the largest subnet, the smallest, then each of the next two steps its own
+  uniform draw), and the detector's optimizer (`accumulating_optimizer`, optax.MultiSteps) steps
+  once a cycle on the 4 batches' mean gradient; the rule is kept in run.json (`sampling_info`),
+  and a supernet directory refuses the other rule (search.nas.spos_points wires it for DSFEC).
 - `SubnetScorer` scores subnets with the weights they inherit: the BN running statistics are
   recalibrated (reset to the mean of the subnet's batch statistics over fixed unaugmented
   training batches, as search.oneshot does for depth), then COCO mAP on validation maps through
@@ -26,6 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from dsfec_jax import zoo
+from dsfec_jax.core import checkpoint
 from dsfec_jax.core.provenance import jsonable, versions
 from dsfec_jax.data.rd.augment import RDAugment
 from dsfec_jax.data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
@@ -35,8 +40,8 @@ from dsfec_jax.layers.yolo import BN_MOMENTUM
 from dsfec_jax.predict_rd import RDPredictor
 from dsfec_jax.profile import counting
 from dsfec_jax.profile.rd import folded_params
-from dsfec_jax.train.loop import RunSpec, train
-from dsfec_jax.train.schedules import Schedule
+from dsfec_jax.train.loop import RunMismatch, RunSpec, checkpoints, train
+from dsfec_jax.train.schedules import Schedule, optimizer
 
 from .elastic import MaskTable, masked_apply, supernet_of
 from .space import Genes, SearchSpace
@@ -82,17 +87,67 @@ class SubnetInputs:
         return {"masks": self.table.masks(genes), "nas": put(self.nas) if fusions is not None else {}}
 
 
-class SPOSStream:
-    """A batch stream whose batch s also carries a uniformly drawn subnet (a pure function of (seed, s))."""
+SAMPLINGS = ("uniform", "sandwich")
+# the sandwich rule (BigNAS, US-Nets): every cycle of batches trains the largest, the smallest and
+# two uniform subnets, their gradients accumulated into one optimizer update (SANDWICH_CYCLE batches)
+SANDWICH = ("largest", "smallest", "uniform", "uniform")
+SANDWICH_CYCLE = len(SANDWICH)
 
-    def __init__(self, stream, space: SearchSpace, subnet_inputs: SubnetInputs, seed: int):
+
+def check_sampling(sampling: str) -> str:
+    if sampling not in SAMPLINGS:
+        raise ValueError(f"sampling {sampling!r}; expected one of {SAMPLINGS}")
+    return sampling
+
+
+def subnet_of_step(space: SearchSpace, seed: int, step: int, sampling: str = "uniform") -> Genes:
+    """Batch `step`'s subnet, a pure function of (seed, step): uniform from default_rng([seed, SALT,
+    step]); sandwich: SANDWICH[step % 4] (largest, smallest, then uniform draws from that rng)."""
+    rule = SANDWICH[step % SANDWICH_CYCLE] if check_sampling(sampling) == "sandwich" else "uniform"
+    if rule == "largest":
+        return space.largest()
+    if rule == "smallest":
+        return space.smallest()
+    return space.sample(np.random.default_rng([int(seed), SALT, int(step)]))
+
+
+def sampling_info(run_dir: str | Path, sampling: str) -> dict:
+    """run.json's record of the sampling rule ({'sampling': rule}); refuses a supernet directory
+    trained with the other rule. A run started before the option existed trained uniformly and has
+    no record: it resumes under uniform with none added (train.loop compares the setup)."""
+    check_sampling(sampling)
+    path = Path(run_dir) / "run.json"
+    if not path.exists():
+        return {"sampling": sampling}
+    import json
+
+    old = json.loads(path.read_text())
+    if old.get("sampling", "uniform") != sampling:
+        raise RunMismatch(f"{run_dir}: this supernet was trained with --sampling {old.get('sampling', 'uniform')}; "
+                          f"the command asks --sampling {sampling}. Use another run directory for the other rule.")
+    return {"sampling": sampling} if "sampling" in old else {}
+
+
+def accumulating_optimizer(schedule: Schedule, total_steps: int, every: int):
+    """The schedule's optimizer stepping once per `every` batches on their mean gradient
+    (optax.MultiSteps); its learning-rate schedule counts optimizer updates (total_steps // every)."""
+    import optax
+
+    return optax.MultiSteps(optimizer(schedule, max(1, total_steps // every)), every).gradient_transformation()
+
+
+class SPOSStream:
+    """A batch stream whose batch s also carries its subnet (subnet_of_step: a pure function of (seed, s))."""
+
+    def __init__(self, stream, space: SearchSpace, subnet_inputs: SubnetInputs, seed: int, sampling: str = "uniform"):
         self.stream, self.space, self.subnet_inputs, self.seed = stream, space, subnet_inputs, int(seed)
+        self.sampling = check_sampling(sampling)
 
     def __getattr__(self, name):
         return getattr(self.stream, name)
 
     def genes(self, step: int) -> Genes:
-        return self.space.sample(np.random.default_rng([self.seed, SALT, step]))
+        return subnet_of_step(self.space, self.seed, step, self.sampling)
 
     def batch(self, step: int) -> dict:
         batch = self.stream.batch(step)
@@ -100,10 +155,13 @@ class SPOSStream:
 
 
 def train_supernet(space: SearchSpace, samples, schedule: Schedule, run_dir: str | Path, steps: int, seed: int = 0,
-                   progress: bool = True, stop_at: int | None = None):
-    """Train (or resume) the space's supernet by SPOS in run_dir -> (SupernetDetector, SubnetInputs, state)."""
+                   progress: bool = True, stop_at: int | None = None, load_only: bool = False):
+    """Train (or resume) the space's supernet by SPOS in run_dir -> (SupernetDetector, SubnetInputs, state).
+    `load_only`: nothing trains or writes; the state is the finished run's (finished_supernet)."""
     supernet = supernet_of(space)
     det, subnet_inputs = SupernetDetector(supernet), SubnetInputs(space, supernet)
+    if load_only:
+        return det, subnet_inputs, finished_supernet(run_dir, steps)
     cfg = supernet.config
     stream = SPOSStream(RDBatchStream(samples, schedule.batch_size, seed, RDAugment(), RDRepresentation(), cfg.classes,
                                       DEFAULT_MAX_BOXES), space, subnet_inputs, seed)
@@ -113,6 +171,19 @@ def train_supernet(space: SearchSpace, samples, schedule: Schedule, run_dir: str
             "train_samples": len(samples), "versions": versions()}
     state, _ = train(det, stream, spec, info)
     return det, subnet_inputs, state
+
+
+def finished_supernet(run_dir: str | Path, steps: int) -> dict:
+    """{'params', 'batch_stats'} of the supernet run in run_dir, read from its last checkpoint, which
+    must be step `steps`'s: how a Ray scoring actor (search.nas.ray_scoring) loads what the driver
+    trained, without train.loop's resume (which would append to run.json) and without training."""
+    last = checkpoints(Path(run_dir))
+    step = checkpoint.read_manifest(last[-1]).get("step") if last else None
+    if step != steps:
+        raise RuntimeError(f"{run_dir}: the supernet is not finished (last checkpoint at step {step}, of {steps}); "
+                           "train it first (search.nas.run trains it before any scoring worker starts)")
+    raw = checkpoint.load(last[-1])
+    return {"params": raw["params"], "batch_stats": raw["batch_stats"]}
 
 
 class SubnetRDPredictor(RDPredictor):

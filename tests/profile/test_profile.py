@@ -75,7 +75,8 @@ def test_xla_flops_agree_with_analytic_within_2_percent_on_the_full_grid():
 
 def test_published_zoo_records_keep_xla_within_2_percent():
     records = json.loads((Path(counting.__file__).parent / "records" / "zoo.json").read_text())["records"]
-    assert {r["model"] for r in records} == set(zoo.available("dsfec"))
+    # the paper's four (a NAS-registered subnet, such as dsfec_search, is not in the published table)
+    assert {r["model"] for r in records} == {"baseline", "dsfec_l", "dsfec_m", "dsfec_s"}
     gaps = {r["model"]: r["xla_vs_analytic"] for r in records}
     assert all(abs(g) <= 0.02 for g in gaps.values()), gaps
 

@@ -9,7 +9,8 @@ import json
 import pytest
 
 from search.nas.__main__ import main
-from search.nas.space import from_key
+from search.nas.space import from_key, key
+from search.nas.spaces import get_space
 
 
 def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
@@ -33,9 +34,11 @@ def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
     top = min(records, key=lambda r: (-r["mAP50"], r["key"]))
     assert study["n"] == 2 and study["pairs"][0]["key"] == top["key"] and study["best_inherited"] == top["key"]
     trained = [json.loads(line) for line in (run_dir / "standalone" / "journal.jsonl").read_text().splitlines()]
-    assert sorted(r["label"] for r in trained) == sorted(p["key"] for p in study["pairs"])
+    hand = key(get_space("yolov8n_adapter").base_genes())  # over the 2 M limit: trained as the reference only
+    assert sorted(r["label"] for r in trained) == sorted([p["key"] for p in study["pairs"]] + [hand])
     assert all(r["status"] == "ok" and r["overrides"]["backbone_width_ratios"] for r in trained)
     assert "## Stand-alone retraining and the ranking study" in report and top["key"] in report
+    assert "| yolov8n_adapter (stand-alone, this recipe) |" in report
     assert ("Kendall tau between inherited and stand-alone mAP50 over 2 subnets" in report) == (study["tau"] is not None)
     best = next(r for r in records if r["key"] == study["best_standalone"])  # registered: the best stand-alone
     cfg = searched_variants(searched)["smoke_search"]
@@ -57,7 +60,6 @@ def test_dsfec_space_searches_retrains_and_registers(tmp_path, monkeypatch):
     from dsfec_jax.models.dsfec.variants import VARIANTS
     from dsfec_jax.models.searched import searched_variants
     from search.nas.latency import LatencyTable
-    from search.nas.spaces import get_space
     import search.nas.register
 
     space = get_space("dsfec")
@@ -77,8 +79,10 @@ def test_dsfec_space_searches_retrains_and_registers(tmp_path, monkeypatch):
     report = (run_dir / "report.md").read_text()
     assert "26,244 subnets" in report and "car_mAP" in report
     trained = [json.loads(line) for line in (run_dir / "standalone" / "journal.jsonl").read_text().splitlines()]
-    assert len(trained) == 2 and all(r["status"] == "ok" and r["init"].startswith("leading:dsfec_m.msgpack@")
+    # two searched subnets and dsfec_m's own architecture (over the 2 ms limit), the same start for all
+    assert len(trained) == 3 and all(r["status"] == "ok" and r["init"].startswith("leading:dsfec_m.msgpack@")
                                      for r in trained)
+    assert key(space.base_genes()) in {r["label"] for r in trained} and "| dsfec_m (stand-alone, this recipe) |" in report
     study = json.loads((run_dir / "ranking.json").read_text())
     cfg = searched_variants(searched, VARIANTS)["dsfec_smoke_search"]
     best = next(r for r in records if r["key"] == study["best_standalone"])

@@ -34,6 +34,10 @@ import numpy as np
 from ...boxes.boxes2d import Boxes2D
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
+# PASCAL VOC's 20 classes, line order of darknet's data/voc.names (class id = index); the models keep
+# their own copy (models/camera/config.py: models never import data), a test holds the two equal
+VOC_CLASSES = tuple("aeroplane bicycle bird boat bottle bus car cat chair cow diningtable dog horse motorbike "
+                    "person pottedplant sheep sofa train tvmonitor".split())
 DETECTION_COLUMNS = "class_id score x1 y1 x2 y2"
 
 

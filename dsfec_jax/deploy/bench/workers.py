@@ -71,6 +71,9 @@ def rd_chains(name: str, runtimes: list[str], threads: int, workdir: Path, repea
     return out
 
 
+CHAINS = {"points": point_chains, "rd": rd_chains}  # modality -> its chains (camera models: not timed yet)
+
+
 def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, warmup: int) -> list[dict]:
     """One process, one thread count: every (model, runtime) chain timed in one interleaved loop."""
     from ... import zoo
@@ -80,7 +83,10 @@ def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, w
     chains, extra = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in models:
-            make = rd_chains if zoo.family_of(name).modality == "rd" else point_chains
+            modality = zoo.family_of(name).modality
+            if modality not in CHAINS:
+                raise ValueError(f"bench: {name!r} reads {modality!r} inputs; the bench times {sorted(CHAINS)} models")
+            make = CHAINS[modality]
             for rt, (steps, fields) in make(name, runtimes, threads, Path(tmp), repeats).items():
                 chains[(name, rt)], extra[(name, rt)] = steps, fields
         samples = time_chains(chains, repeats, warmup)

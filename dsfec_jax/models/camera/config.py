@@ -65,6 +65,9 @@ class CameraConfig:
     name: str = "shuffle_yolov3"
     backbone: str = "shuffle"  # 'shuffle' | 'darknet53' (net.py's table)
     num_classes: int = 20  # VOC
+    # class names in logit order; () names them by num_classes (VOC's 20, else class0..). A model
+    # trained on the street benchmark carries its 5 names (the train command sets both fields)
+    class_names: tuple[str, ...] = ()
     num_anchors: int = 3  # anchors per scale (YOLOv3: 9 over 3 scales)
     # backbone: five stages at strides 2, 4, 8, 16, 32 (Table 1 columns)
     widths: tuple[int, ...] = (64, 128, 192, 256, 384)
@@ -93,7 +96,9 @@ class CameraConfig:
 
     @property
     def classes(self) -> tuple[str, ...]:
-        """Class names: VOC's at 20 classes, else class0..class{n-1}."""
+        """Class names: `class_names` when given, else VOC's at 20 classes, else class0..class{n-1}."""
+        if self.class_names:
+            return tuple(self.class_names)
         return VOC_CLASSES if self.num_classes == len(VOC_CLASSES) else tuple(
             f"class{i}" for i in range(self.num_classes))
 
@@ -139,6 +144,9 @@ def validate(cfg: CameraConfig) -> None:
     need(cfg.backbone in BACKBONES, "backbone", f"one of {BACKBONES}")
     need(int(cfg.num_classes) >= 1, "num_classes", "at least 1")
     need(int(cfg.num_anchors) >= 1, "num_anchors", "at least 1")
+    need(not cfg.class_names or (len(cfg.class_names) == cfg.num_classes
+                                 and len(set(cfg.class_names)) == len(cfg.class_names)), "class_names",
+         f"() or {cfg.num_classes} distinct names (one per class: num_classes)")
     need(len(cfg.widths) == STAGES and all(int(w) >= 2 for w in cfg.widths), "widths", f"{STAGES} widths")
     need(len(cfg.repeats) == STAGES and all(int(r) >= 1 for r in cfg.repeats), "repeats", f"{STAGES} repeats >= 1")
     need(len(cfg.head_widths) == len(STRIDES) and all(int(w) >= 4 for w in cfg.head_widths), "head_widths",

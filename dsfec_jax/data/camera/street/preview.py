@@ -28,7 +28,8 @@ def outline(img: np.ndarray, xyxy, color, dashed: bool = False) -> None:
     """Draws the pixel-edge box (x1, y1, x2, y2) one pixel wide inside its edges."""
     h, w = img.shape[:2]
     x1, y1, x2, y2 = (int(round(v)) for v in xyxy)
-    x1, y1, x2, y2 = max(x1, 0), max(y1, 0), min(max(x2 - 1, x1), w - 1), min(max(y2 - 1, y1), h - 1)
+    x1, y1 = min(max(x1, 0), w - 1), min(max(y1, 0), h - 1)  # a box flat on the far edge stays drawable
+    x2, y2 = min(max(x2 - 1, x1), w - 1), min(max(y2 - 1, y1), h - 1)
     cols, rows = np.arange(x1, x2 + 1), np.arange(y1, y2 + 1)
     if dashed:
         cols, rows = cols[(cols - x1) % 4 < 2], rows[(rows - y1) % 4 < 2]

@@ -1,0 +1,193 @@
+"""The camera halves of `dsfec train | eval | predict | ship`: what the commands do for a model whose
+family reads RGB images (zoo.family_of(name).modality == 'image': Shuffle-YOLOv3, Darknet53-YOLOv3).
+cli.py parses the flags and hands camera models here; the shared flags read:
+
+- `--data street` (the family's embedded synthetic benchmark, also what `synthetic` means here),
+  `street:DIR` (the same frames through a PNG/NPZ cache under DIR), `voc:DIR` (PASCAL VOC: a
+  VOCdevkit year, or the 100 real VOC2012 images' folder with `--split all`). `--frames` counts
+  images.
+- Classes. `dsfec train` gives the model the data source's classes (the street benchmark's car,
+  truck, bus, pedestrian, cyclist: `num_classes=5, class_names=(...)`, recorded in run.json's
+  overrides) unless --set names them. `dsfec eval / predict` build the model with the classes of
+  the run that made --weights (zoo.trained_fields: the manifest of shipped weights, or the run.json
+  of the run directory a checkpoint sits in; --set wins); when those differ from the data's, detections are
+  renamed into the data's classes (data/camera/sources.class_map: same name, or pedestrian <->
+  person and cyclist <-> bicycle) and only the classes both know are scored.
+- `--schedule quick|paper` is the family's profile (yolo3_quick / yolo3_paper, train/schedules.py)
+  with its multi-scale sizes (train/fit_camera.MULTI_SCALE); `--sizes LOW,HIGH` (or one size)
+  overrides them. Validation, eval and predict letterbox each image to `--size` (416) on its long side.
+- eval / predict keep detections down to darknet's mAP threshold (0.005) unless --score-threshold
+  says otherwise; predict writes COCO JSON (results list, and with --gt-out the ground truth; image
+  pixels) and with --png-dir one PNG per image (ground truth in class colours, predictions scoring
+  >= 0.25 in magenta).
+- the point-cloud flags (--window, --window-sampling, --max-pillars) are refused, naming the flag.
+
+This module never imports cli (the library's one-way door): cli passes what it parsed.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from . import zoo
+from .cli_rd import refuse_point_flags
+from .models.camera.decode import EVAL_SCORE
+from .models.camera.family import FAMILY as CAMERA
+
+READS = "whole camera images"
+EVAL_SIZE = 416  # eval / predict: the long side images are letterboxed to (the paper's 416)
+TRAIN_FRAMES = 1000  # street frames generated for training without --frames (~10 frames/s per core)
+PNG_MIN_SCORE = 0.25  # predictions drawn on a PNG (ultralytics' predict default, as cli_rd's)
+CLASS_FIELDS = CAMERA.weight_fields  # num_classes, class_names: set from the training data
+SYNONYMS = {"synthetic": "street"}  # the commands' default --data is the family's embedded benchmark
+
+
+def data_source(args) -> str:
+    return SYNONYMS.get(args.data, args.data)
+
+
+def _images(args, split: str, count: int | None):
+    """Images of --data, or exit with the source's message (it names --data and what was expected)."""
+    from .data.camera.sources import NoImages, load_camera_images
+
+    try:
+        return load_camera_images(data_source(args), split, count, args.seed)
+    except (NoImages, ValueError, FileNotFoundError) as err:
+        sys.exit(f"dsfec {args.command}: {err}")
+
+
+def _source_classes(args) -> tuple[str, ...]:
+    from .data.camera.sources import source_classes
+
+    try:
+        return source_classes(data_source(args))
+    except (ValueError, FileNotFoundError) as err:
+        sys.exit(f"dsfec {args.command}: {err}")
+
+
+def with_data_classes(args, overrides: dict) -> dict:
+    """The model's classes for training on --data: the source's, unless --set names them."""
+    if any(f in overrides for f in CLASS_FIELDS):
+        return overrides
+    classes = _source_classes(args)
+    return {**overrides, "num_classes": len(classes), "class_names": tuple(classes)}
+
+
+def eval_size(args) -> int:
+    """--size (default EVAL_SIZE), or exit when it is not a multiple of the networks' stride 32."""
+    size = args.size or EVAL_SIZE
+    if size % 32:
+        sys.exit(f"dsfec {args.command}: --size {size}: expected a multiple of 32")
+    return size
+
+
+def parse_sizes(text: str | None):
+    """--sizes LOW,HIGH (every multiple of 32 between) or SIZE -> MultiScale; None: the profile's."""
+    from .data.camera.batches import MultiScale
+
+    if text is None:
+        return None
+    try:
+        bounds = [int(v) for v in text.split(",")]
+        if len(bounds) not in (1, 2):
+            raise ValueError(text)
+        return MultiScale.span(bounds[0], bounds[-1]) if len(bounds) == 2 else MultiScale((bounds[0],))
+    except ValueError as err:
+        sys.exit(f"--sizes {text!r}: expected LOW,HIGH or SIZE, multiples of 32 ({err})")
+
+
+def train(args, overrides: dict, schedule, info: dict) -> int:
+    """`dsfec train` of a camera model: fit_camera on the images of --data."""
+    from .train.fit_camera import fit_camera
+    from .train.loop import RunMismatch
+
+    refuse_point_flags(args, READS)
+    overrides, sizes, size = with_data_classes(args, overrides), parse_sizes(args.sizes), eval_size(args)
+    try:
+        zoo.config(args.model, **overrides)
+    except (TypeError, ValueError) as err:
+        sys.exit(f"--set: {err}")
+    images = _images(args, args.split, args.frames or TRAIN_FRAMES)
+    val = _images(args, "val", args.val_frames)
+    try:
+        _, _, final = fit_camera(args.model, overrides, images, val, schedule, args.run_dir, args.seed, args.steps,
+                                 not args.no_augment, args.eval_every, info, sizes=sizes,
+                                 eval_size=size)
+    except (RunMismatch, ValueError) as err:  # another setup in the run directory; classes the model lacks
+        sys.exit(f"dsfec train: {err}")
+    print(json.dumps({"run_dir": str(args.run_dir), "final": final}))
+    return 0
+
+
+def _predictor(args, overrides: dict, score_threshold: float):
+    from .data.camera.sources import class_map
+
+    weights = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
+    try:  # the classes of the run that made the weights (zoo.load reads them the same way), --set first
+        classes = zoo.config(args.model, **{**zoo.trained_fields(weights, CLASS_FIELDS), **overrides}).classes
+        mapping = class_map(classes, _source_classes(args))
+    except (TypeError, ValueError) as err:
+        sys.exit(f"dsfec {args.command}: {err}")
+    options = {"score_threshold": score_threshold, "size": eval_size(args), "class_map": mapping}
+    try:
+        return zoo.load(args.model, weights=args.weights, predictor_options=options, **overrides)
+    except FileNotFoundError as err:
+        sys.exit(f"dsfec {args.command}: {err}" + ("" if "--weights" in str(err) else " (--weights)"))
+
+
+def eval_or_predict(args, overrides: dict) -> int:
+    """`dsfec eval` / `dsfec predict` of a camera model: VOC mAP@0.5 (VOC07 and all-point) and COCO AP."""
+    from .cli_report import predict_and_report
+
+    refuse_point_flags(args, READS)
+    eval_size(args)
+    if args.runtime != "jax":
+        sys.exit(f"dsfec {args.command}: --runtime {args.runtime}: camera models run in JAX only (no ONNX export yet)")
+    threshold = EVAL_SCORE if args.score_threshold is None else args.score_threshold
+    images = _images(args, args.split, args.frames)  # a bad --data fails before any network is built
+    predictor = _predictor(args, overrides, threshold)
+    return predict_and_report(args, images, predictor, predictor.predict_images, write_predictions, "images",
+                              score_threshold=threshold, classes_scored=list(predictor.classes))
+
+
+def write_predictions(args, images, detections: dict, predictor) -> None:
+    """--out: the COCO results list (image pixels; category ids 1..C in the predictor's class order);
+    --gt-out: the scored ground truth with the same ids (difficult as iscrowd); --png-dir: PNGs."""
+    from .core import atomic
+    from .evaluate_camera import ground_truth
+    from .metrics.boxes2d.coco_json import coco_dets_to_list, default_category_ids, default_image_ids
+    from .metrics.boxes2d.voc_coco import voc_gt_to_coco
+
+    ids = [images[i].image_id for i in range(len(images))]
+    image_ids, category_ids = default_image_ids(ids), default_category_ids(predictor.classes)
+    atomic.write_json(args.out, coco_dets_to_list(detections, category_ids, image_ids))
+    if args.gt_out:
+        atomic.write_json(args.gt_out, voc_gt_to_coco(ground_truth(images, predictor.classes)[0], predictor.classes))
+    if args.png_dir:
+        from .data.camera.preview import save_camera_png
+
+        min_score = PNG_MIN_SCORE if args.png_min_score is None else args.png_min_score
+        for i in range(len(images)):
+            item = images[i]
+            found = detections[item.image_id]
+            save_camera_png(item, Path(args.png_dir) / f"{item.image_id.replace('/', '_')}.png",
+                            found.select(found.scores >= min_score))
+
+
+def ship_predictor(model: str, source: Path, info: dict):
+    """(CameraPredictor at the evaluation settings, variables) of a run's checkpoint, built with the
+    run's config overrides and evaluation size."""
+    from .predict_camera import CameraPredictor
+
+    det = zoo.create(model, **{k: tuple(v) if isinstance(v, list) else v for k, v in info.get("overrides", {}).items()})
+    variables = zoo.load_variables(det, source)
+    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    return CameraPredictor(det, variables, size=info.get("eval_size", 416)), variables
+
+
+def refuse(args, what: str) -> int:
+    """Commands the camera family does not have yet (ONNX export, INT8, bench): say so."""
+    sys.exit(f"dsfec {args.command}: {args.model!r} is a camera model; {what} is not implemented for the "
+             "camera family yet (train, eval, predict and ship are)")

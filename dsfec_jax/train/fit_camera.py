@@ -1,0 +1,88 @@
+"""Train a camera zoo detector (Shuffle-YOLOv3, Darknet53-YOLOv3) on camera images, validating with
+the family's protocol (VOC07 mAP@0.5 headline, evaluate_camera): `train.fit.fit` hands image models
+here, so `dsfec train` reaches it the same way as the other families.
+
+Batches come from data.camera.batches.CameraBatchStream (batch s a pure function of (seed, s), its
+input size too: resumed runs see the same data at the same sizes), the targets from the family's
+pad_batch (models/camera/targets.py, the model's class names); the loop (train.loop) is the shared
+one: resumable run directory, JSONL metrics, last-N and best checkpoints, background batch building.
+The jitted step is one `jax.jit`, cached per input shape, so multi-scale training compiles each
+size once. Before each validation the BN running statistics are re-estimated on PRECISE_BN_IMAGES
+unaugmented training images (train/precise_bn.py): with momentum 0.99 they lag far behind the
+weights in a run of a few hundred steps, which then scores ~0 whatever it learnt.
+
+Multi-scale per profile (MULTI_SCALE, by schedule name): yolo3_paper trains as darknet does, 320-608
+every 10 batches; yolo3_quick 320-416 (each size costs a compile of the train step, ~50 s on one
+core of the 2-core CPU for Shuffle-YOLOv3, and the small sizes are the cheap ones); any other
+schedule at 416.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from pathlib import Path
+from typing import Sequence
+
+from .. import zoo
+from ..core.provenance import jsonable
+from ..data.camera.augment import CameraAugment
+from ..data.camera.batches import DARKNET_SIZES, CameraBatchStream, MultiScale
+from ..data.camera.images import CameraImage
+from ..evaluate import validate as run_validation
+from ..models.camera.targets import DEFAULT_MAX_BOXES, pad_batch
+from ..predict_camera import CameraPredictor
+from .loop import RunSpec, run_record, train
+from .precise_bn import precise_bn
+from .schedules import Schedule
+
+MULTI_SCALE = {"yolo3_paper": MultiScale(DARKNET_SIZES), "yolo3_quick": MultiScale.span(320, 416)}
+FIXED_SIZE = MultiScale((416,))
+PRECISE_BN_IMAGES = 64  # training images the BN statistics are re-estimated on before a validation
+
+
+def multi_scale_for(schedule: Schedule) -> MultiScale:
+    return MULTI_SCALE.get(schedule.name, FIXED_SIZE)
+
+
+def fit_camera(model: str, overrides: dict, images: Sequence[CameraImage], val: Sequence[CameraImage],
+               schedule: Schedule, run_dir: str | Path, seed: int = 0, steps: int | None = None, augment: bool = True,
+               eval_every: int | None = 200, run_info: dict | None = None, progress: bool = True,
+               init_variables: dict | None = None, sizes: MultiScale | None = None, eval_size: int = 416,
+               max_boxes: int = DEFAULT_MAX_BOXES,
+               precise_bn_images: int = PRECISE_BN_IMAGES) -> tuple[zoo.Detector, dict, dict]:
+    """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val scores).
+    Images carry class names among the model's (`class_names` / `num_classes` overrides: the street
+    benchmark's 5 classes, see cli_camera). `sizes` None: the schedule's multi-scale (MULTI_SCALE);
+    validation letterboxes each image to `eval_size` (its long side), after the BN statistics are
+    re-estimated on `precise_bn_images` training images (0: not; rounded up to whole batches)."""
+    det = zoo.create(model, **overrides)
+    family = zoo.require_modality(det.config, "image", "fit_camera")
+    sizes = sizes or multi_scale_for(schedule)
+    targets = functools.partial(pad_batch, class_names=det.config.classes, max_boxes=max_boxes)
+    stream = CameraBatchStream(images, schedule.batch_size, seed, targets, CameraAugment() if augment else None, sizes)
+    total = steps or schedule.total_steps(len(images))
+    spec = RunSpec(Path(run_dir), schedule, seed, total_steps=total, progress=progress)
+    info = run_record(run_info, model, overrides, det.config, schedule, seed, total, stream.augment,
+                      train_images=len(images), val_images=len(val), multi_scale=jsonable(dataclasses.asdict(sizes)),
+                      aspect=stream.aspect, eval_size=eval_size, max_boxes=max_boxes,
+                      precise_bn_images=precise_bn_images)
+
+    predictor = CameraPredictor(det, None, size=eval_size)  # one jitted network for every validation
+
+    def validate(state):
+        predictor.variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
+        return run_validation(family.metric.name, predictor, val)[0]
+
+    # BN statistics re-estimated before each validation on unaugmented training images at the
+    # evaluation size (train/precise_bn.py: the running ones lag far behind in short runs)
+    calibration = CameraBatchStream(images, schedule.batch_size, seed, targets, None, MultiScale((eval_size,)),
+                                    stream.aspect)
+    count = min(-(-precise_bn_images // schedule.batch_size), calibration.per_epoch)
+    recalibrate = precise_bn(det, lambda: [calibration.batch(k) for k in range(count)]) if count else None
+    state, scores = train(det, stream, spec, info, validate, eval_every or total, init_variables=init_variables,
+                          best_key=family.metric.headline, before_eval=recalibrate)
+    if scores is None:  # a finished run resumed: nothing trained (re-estimating again gives the same statistics)
+        state = recalibrate(state) if recalibrate else state
+        scores = validate(state)
+    return det, state, scores
