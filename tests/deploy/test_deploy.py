@@ -43,13 +43,15 @@ def realistic_variables(det, name: str) -> dict:
     network's scale (raw random init blows them up to 1e2-1e3 and float32 rounding with them)."""
     if zoo.shipped_weights(name).is_file():
         return zoo.load_variables(det, zoo.shipped_weights(name))
-    from search.oneshot import BN_MOMENTUM
-
+    supernet = zoo.family_of(name).supernet  # the family's BN momentum (DSFEC's: layers/conv)
+    if supernet is None:
+        raise AssertionError(f"{name}: no shipped weights and no BN momentum on its family record to calibrate with")
+    momentum = supernet.bn_momentum
     variables = det.init(jax.random.key(0))
     frames = load_frames("synthetic", "train", 4)
     batch = {k: np.concatenate([frame_inputs(det, f)[k] for f in frames]) for k in ("points", "mask", "coords")}
     _, updates = det.apply(variables, batch, train=True)
-    stats = jax.tree.map(lambda n, o: (n - BN_MOMENTUM * o) / (1 - BN_MOMENTUM), updates["batch_stats"],
+    stats = jax.tree.map(lambda n, o: (n - momentum * o) / (1 - momentum), updates["batch_stats"],
                          variables["batch_stats"])
     return {"params": variables["params"], "batch_stats": stats}
 
