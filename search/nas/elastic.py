@@ -35,7 +35,7 @@ import numpy as np
 from dsfec_jax import zoo
 from dsfec_jax.layers.yolo import PaddedConv, YoloConv
 
-from .slices import masked_apply  # noqa: F401  (masks on conv blocks' outputs, by module path)
+from .slices import claim_widths, masked_apply  # noqa: F401  (masked_apply: masks on blocks' outputs by path)
 
 Path = tuple[str, ...]
 
@@ -182,6 +182,7 @@ class MaskTable:
         self.space = space
         params = param_shapes(supernet)
         self.full = {p: (b["conv"]["kernel"].shape[-1], _halved(p[-1], parent)) for p, b, parent in conv_blocks(params)}
+        full_widths = {p: width for p, (width, _) in self.full.items()}
         self.control: dict[Path, tuple[int, dict[int, int]]] = {}
         largest = space.largest()
         top = space.overrides(largest)
@@ -195,14 +196,7 @@ class MaskTable:
                 if set(widths) != set(self.full):
                     raise ValueError(f"{space.name}: {choice.name}={choice.options[o]} changes which conv blocks exist "
                                      "(a depth choice): masks cannot select it")
-                for p, w in widths.items():
-                    if w == self.full[p][0]:
-                        continue
-                    owner, table = self.control.setdefault(p, (i, {}))
-                    if owner != i:
-                        raise ValueError(f"{space.name}: conv block {'/'.join(p)} is set by both "
-                                         f"{space.choices[owner].name} and {choice.name}")
-                    table[o] = w
+                claim_widths(self.control, space, i, o, widths, full_widths, "conv block")
 
     def widths(self, genes) -> dict[Path, int]:
         out = {}

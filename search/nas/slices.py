@@ -69,14 +69,7 @@ class SliceMasks:
                 if set(widths) != set(self.full):
                     raise ValueError(f"{space.name}: {choice.name}={choice.options[o]} changes which modules exist; "
                                      "only depth choices may (kind='depth')")
-                for p, w in widths.items():
-                    if w == self.full[p]:
-                        continue
-                    owner, table = self.control.setdefault(p, (i, {}))
-                    if owner != i:
-                        raise ValueError(f"{space.name}: module {'/'.join(p)} is set by both "
-                                         f"{space.choices[owner].name} and {choice.name}")
-                    table[o] = w
+                claim_widths(self.control, space, i, o, widths, self.full, "module")
 
     def widths(self, genes: Genes) -> dict[Path, int]:
         return {p: table.get(genes[i], self.full[p]) for p, (i, table) in self.control.items()}
@@ -88,6 +81,21 @@ class SliceMasks:
             m[:w] = 1.0
             out["/".join(p)] = m
         return out
+
+
+def claim_widths(control: dict, space: SearchSpace, gene: int, option: int, widths: dict, full: dict,
+                 what: str) -> None:
+    """Record in `control` ({path: (gene, {option: width})}) the widths that `gene` at `option` sets
+    (the paths whose width differs from `full`'s), refusing a path another gene already sets: a
+    width read from one look-up table must have one owner."""
+    for p, w in widths.items():
+        if w == full[p]:
+            continue
+        owner, table = control.setdefault(p, (gene, {}))
+        if owner != gene:
+            raise ValueError(f"{space.name}: {what} {'/'.join(p)} is set by both "
+                             f"{space.choices[owner].name} and {space.choices[gene].name}")
+        table[option] = w
 
 
 def _mask_outputs(channel_masks: dict):
