@@ -8,6 +8,7 @@ thin commands over the library, the same flags for every family.
     dsfec predict --model yolov8n --weights runs/v8n/checkpoints/best.msgpack --out dets.json --gt-out gt.json --png-dir png
     dsfec train   --model shuffle_yolov3 --data street --schedule quick --run-dir runs/sy3 [--steps N]
     dsfec eval    --model shuffle_yolov3 --weights runs/sy3/checkpoints/best.msgpack --data voc:DIR --split all
+    dsfec export  --model shuffle_yolov3 --weights runs/sy3/checkpoints/best.msgpack --out exports/sy3 [--size 416]
 
 Each command asks the model's family what it reads (zoo.family_of(name).modality) and hands
 range-Doppler models to cli_rd and camera models to cli_camera, where their readings of the shared
@@ -108,17 +109,23 @@ def parse(argv=None) -> argparse.Namespace:
     ex.add_argument("--max-pillars", type=positive_int, default=None,
                     help=f"point models: pillar slots (default {RUN_PILLARS})")
     ex.add_argument("--input-hw", default=None, metavar="H,W",
-                    help="range-Doppler models: the exported input size in map cells (default 256,64: RADDet maps)")
+                    help="range-Doppler models: the exported input size in map cells (default 256,64: RADDet maps); "
+                         "camera models: the letterboxed input in pixels, multiples of 32 (a square takes every image)")
+    ex.add_argument("--size", type=positive_int, default=None,
+                    help="camera models: export the street frames' letterboxed rectangle at this long side "
+                         "(a multiple of 32; default 416: 256 x 416)")
     ex.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
     qz = sub.add_parser("quantize", help="static INT8 (onnxruntime) of an export, calibrated on synthetic frames")
     qz.add_argument("--onnx", required=True, help="export directory (dsfec export)")
     qz.add_argument("--out", required=True, help="directory for the INT8 model.onnx and deploy.json")
-    qz.add_argument("--calib-frames", type=positive_int, default=64, help="synthetic train frames to calibrate on")
+    qz.add_argument("--calib-frames", type=positive_int, default=64,
+                    help="synthetic train frames to calibrate on (RD samples; camera: street images)")
     qz.add_argument("--seed", type=int, default=0)
     qz.add_argument("--calibration", default="minmax", choices=("minmax", "percentile", "entropy"),
                     help="how activation ranges are set from the calibration frames")
-    b = sub.add_parser("bench", help="batch-1 latency from raw points to boxes per stage, runtime and thread count; "
-                                      "--train: training throughput (frames/s, fwd + bwd, GFLOP/s, breakdown)")
+    b = sub.add_parser("bench", help="batch-1 latency from raw input (points, RD map, image) to boxes per stage, "
+                                      "runtime and thread count; --train: training throughput (frames/s, fwd + bwd, "
+                                      "GFLOP/s, breakdown)")
     b.add_argument("--models", default=None,
                    help=f"comma-separated zoo names (default {INFER_BENCH_MODELS}); with --train also 'all' "
                         f"(every registered variant), default {TRAIN_BENCH_MODELS}")
@@ -140,6 +147,9 @@ def parse(argv=None) -> argparse.Namespace:
                    help="--train: also measure each model with these config overrides, interleaved, and report the ratios")
     b.add_argument("--no-breakdown", action="store_true", help="--train: skip the XLA-profiler breakdown of the step")
     b.add_argument("--readme", default=None, help="--train: rewrite the train-bench table in this README")
+    b.add_argument("--size", type=positive_int, default=None,
+                   help="--train, camera models: the long side training images are letterboxed to "
+                        "(a multiple of 32; default 416: 256 x 416 street inputs)")
     for name, split in (("eval", "test"), ("predict", "test")):
         q = sub.add_parser(name, help=f"{name} a zoo model")
         common(q, split)
@@ -386,12 +396,14 @@ def run_export(args) -> int:
     from . import zoo
     from .deploy import export
 
+    if is_camera(args.model):
+        from . import cli_camera
+        return cli_camera.export(args, parse_overrides(args.set), command_line(args))
+    if args.size:
+        sys.exit(f"dsfec export: --size applies to camera models; {args.model!r} is not one")
     if is_rd(args.model):
         from . import cli_rd
         return cli_rd.export(args, checked_overrides(args.model, parse_overrides(args.set)), command_line(args))
-    if is_camera(args.model):
-        from . import cli_camera
-        return cli_camera.refuse(args, "ONNX export")
     if args.input_hw:
         sys.exit(f"dsfec export: --input-hw applies to range-Doppler models; {args.model!r} reads point clouds")
     det = zoo.create(args.model, **checked_overrides(args.model, {"max_pillars": args.max_pillars or RUN_PILLARS,
@@ -409,7 +421,7 @@ def run_export(args) -> int:
 
 def exported_modality(export_dir: str) -> str:
     """What an export directory's model reads: its deploy.json's "modality" (range-Doppler exports
-    write 'rd'; point exports predate the field)."""
+    write 'rd', camera exports 'image'; point exports predate the field)."""
     manifest = Path(export_dir) / "deploy.json"
     if not manifest.is_file():
         sys.exit(f"--onnx {export_dir}: no deploy.json; expected a directory written by `dsfec export`")
@@ -420,9 +432,13 @@ def exported_modality(export_dir: str) -> str:
 
 
 def run_quantize(args) -> int:
-    if exported_modality(args.onnx) == "rd":
+    modality = exported_modality(args.onnx)
+    if modality == "rd":
         from . import cli_rd
         return cli_rd.quantize(args)
+    if modality == "image":
+        from . import cli_camera
+        return cli_camera.quantize(args)
     from .data.points.sources import load_frames
     from .deploy.quantize import quantize
 
@@ -442,26 +458,16 @@ def bench_threads(text: str) -> list[int]:
     return threads
 
 
-TRAIN_BENCH_FLAGS = ("batch", "window", "max_pillars", "fixed_pillars", "compare", "no_breakdown", "readme")
-
-
-def no_camera(models: list[str]) -> list[str]:
-    """`models`, or exit naming the camera ones: `dsfec bench` does not time the camera family yet."""
-    from . import zoo
-
-    camera = [m for m in models if m in zoo.REGISTRY and zoo.family_of(m).modality == "image"]
-    if camera:
-        sys.exit(f"dsfec bench: {camera} are camera models; `dsfec bench` does not time the camera family yet")
-    return models
+TRAIN_BENCH_FLAGS = ("batch", "window", "max_pillars", "fixed_pillars", "compare", "no_breakdown", "readme", "size")
 
 
 def bench_models(text: str) -> list[str]:
-    """--train's models ('all': every registered variant but the camera ones)."""
+    """--train's models ('all': every registered variant)."""
     from . import zoo
 
     if text == "all":
-        return [m for m in zoo.available() if zoo.family_of(m).modality != "image"]
-    return no_camera([m for m in text.split(",") if m])
+        return zoo.available()
+    return [m for m in text.split(",") if m]
 
 
 def run_train_bench(args) -> int:
@@ -471,7 +477,8 @@ def run_train_bench(args) -> int:
     try:
         settings = training.Settings(batch=args.batch or 8, window=window or None, max_pillars=args.max_pillars or RUN_PILLARS,
                                      repeats=args.repeats or 10, warmup=2 if args.warmup is None else args.warmup,
-                                     breakdown=not args.no_breakdown, size_pillars=not args.fixed_pillars)
+                                     breakdown=not args.no_breakdown, size_pillars=not args.fixed_pillars,
+                                     image_size=args.size or training.IMAGE_SIZE)
         compare = training.parse_compare(args.compare) or None
         if args.readme:
             training.check_readme(args.readme)
@@ -497,7 +504,7 @@ def run_bench(args) -> int:
     train_only = [f"--{k.replace('_', '-')}" for k in TRAIN_BENCH_FLAGS if getattr(args, k) not in (None, False)]
     if train_only:
         sys.exit(f"dsfec bench: {', '.join(train_only)} need --train")
-    models = no_camera([m for m in (args.models or INFER_BENCH_MODELS).split(",") if m])
+    models = [m for m in (args.models or INFER_BENCH_MODELS).split(",") if m]
     runtimes = [r for r in args.runtimes.split(",") if r]
     bad = [m for m in models if m not in zoo.available()] + [r for r in runtimes if r not in bench.RUNTIMES]
     if bad:

@@ -1,5 +1,6 @@
-"""The camera halves of `dsfec train | eval | predict | ship`: what the commands do for a model whose
-family reads RGB images (zoo.family_of(name).modality == 'image': Shuffle-YOLOv3, Darknet53-YOLOv3).
+"""The camera halves of `dsfec train | eval | predict | ship | export | quantize`: what the commands do
+for a model whose family reads RGB images (zoo.family_of(name).modality == 'image': Shuffle-YOLOv3,
+Darknet53-YOLOv3).
 cli.py parses the flags and hands camera models here; the shared flags read:
 
 - `--data street` (the family's embedded synthetic benchmark, also what `synthetic` means here),
@@ -20,7 +21,16 @@ cli.py parses the flags and hands camera models here; the shared flags read:
   says otherwise; predict writes COCO JSON (results list, and with --gt-out the ground truth; image
   pixels) and with --png-dir one PNG per image (ground truth in class colours, predictions scoring
   >= 0.25 in magenta).
-- the point-cloud flags (--window, --window-sampling, --max-pillars) are refused, naming the flag.
+- `dsfec export` writes the network and the YOLOv3 decode (deploy/export_camera.py) at one letterboxed
+  size: `--size S` the street frames' rectangle at long side S (default 416: 256 x 416), or
+  `--input-hw H,W` any (multiples of 32; a square takes images of every shape, letterboxed as
+  darknet does). The classes are those of the run that made --weights, as for eval.
+- `dsfec eval / predict --runtime onnx --onnx DIR` run such an export (or its `dsfec quantize`
+  INT8 copy) with ONNX Runtime; the letterbox and darknet's NMS run on the host as in the JAX
+  predictor, the size is the export's (a different --size is refused) and --weights is not read.
+- `dsfec quantize` calibrates on --calib-frames letterboxed street train images (seed --seed).
+- the point-cloud flags (--window, --window-sampling, --max-pillars, export's --top-k) are refused,
+  naming the flag.
 
 This module never imports cli (the library's one-way door): cli passes what it parsed.
 """
@@ -121,6 +131,28 @@ def train(args, overrides: dict, schedule, info: dict) -> int:
     return 0
 
 
+def _onnx_predictor(args, score_threshold: float):
+    """OrtCameraPredictor of --onnx, renaming the export's classes into --data's."""
+    from .data.camera.sources import class_map
+    from .deploy.ort import read_manifest
+    from .deploy.ort_camera import OrtCameraPredictor
+
+    if not args.onnx:
+        sys.exit("--runtime onnx needs --onnx DIR (written by `dsfec export --model NAME --out DIR`)")
+    try:
+        _, manifest = read_manifest(args.onnx, "image")
+        if manifest["model"] != args.model:
+            sys.exit(f"{args.onnx}: holds {manifest['model']!r}, not --model {args.model!r}")
+        predictor = OrtCameraPredictor(args.onnx, score_threshold=score_threshold,
+                                       class_map=class_map(manifest["classes"], _source_classes(args)))
+    except (FileNotFoundError, ValueError) as err:  # no export there, another modality's, no shared class
+        sys.exit(f"dsfec {args.command}: --onnx {err}")
+    if args.size is not None and args.size != predictor.size:
+        sys.exit(f"dsfec {args.command}: --size {args.size}: the export {args.onnx} takes images letterboxed to "
+                 f"{predictor.size} (its input {tuple(predictor.manifest['input_hw'])}); drop --size or export again")
+    return predictor
+
+
 def _predictor(args, overrides: dict, score_threshold: float):
     from .data.camera.sources import class_map
 
@@ -143,11 +175,11 @@ def eval_or_predict(args, overrides: dict) -> int:
 
     refuse_point_flags(args, READS)
     eval_size(args)
-    if args.runtime != "jax":
-        sys.exit(f"dsfec {args.command}: --runtime {args.runtime}: camera models run in JAX only (no ONNX export yet)")
     threshold = EVAL_SCORE if args.score_threshold is None else args.score_threshold
-    images = _images(args, args.split, args.frames)  # a bad --data fails before any network is built
-    predictor = _predictor(args, overrides, threshold)
+    # a bad --data fails before any network is compiled; a bad --onnx (read, not compiled) before images are made
+    onnx = _onnx_predictor(args, threshold) if args.runtime == "onnx" else None
+    images = _images(args, args.split, args.frames)
+    predictor = onnx or _predictor(args, overrides, threshold)
     return predict_and_report(args, images, predictor, predictor.predict_images, write_predictions, "images",
                               score_threshold=threshold, classes_scored=list(predictor.classes))
 
@@ -187,7 +219,53 @@ def ship_predictor(model: str, source: Path, info: dict):
     return CameraPredictor(det, variables, size=info.get("eval_size", 416)), variables
 
 
-def refuse(args, what: str) -> int:
-    """Commands the camera family does not have yet (ONNX export, INT8, bench): say so."""
-    sys.exit(f"dsfec {args.command}: {args.model!r} is a camera model; {what} is not implemented for the "
-             "camera family yet (train, eval, predict and ship are)")
+def export_input_hw(args) -> tuple[int, int]:
+    """The letterboxed (H, W) to export: --input-hw, else the street frames' rectangle at --size
+    (default EVAL_SIZE: 256 x 416); exit when both are given or a side is not a multiple of 32."""
+    from .deploy.export_camera import check_input_hw, street_input_hw
+
+    if args.input_hw and args.size:
+        sys.exit("dsfec export: give --size (the street frames' rectangle at that long side) or --input-hw H,W, "
+                 "not both")
+    if not args.input_hw:
+        return street_input_hw(eval_size(args))
+    try:
+        return check_input_hw([int(v) for v in args.input_hw.split(",")])
+    except ValueError as err:
+        sys.exit(f"dsfec export: --input-hw {args.input_hw!r}: {err}")
+
+
+def export(args, overrides: dict, command: str) -> int:
+    """`dsfec export` of a camera model: deploy.export_camera (network + YOLOv3 decode; ONNX and
+    jax.export) with the classes of the run that made --weights."""
+    from .deploy.export_camera import export_camera
+
+    refuse_point_flags(args, READS)
+    input_hw = export_input_hw(args)
+    path = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
+    if not path.is_file():
+        sys.exit(f"no weights at {path}: pass --weights (a trained checkpoint or weights file)")
+    try:
+        det = zoo.create(args.model, **{**zoo.trained_fields(path, CLASS_FIELDS), **overrides})
+    except (TypeError, ValueError) as err:
+        sys.exit(f"--set: {err}")
+    variables = zoo.load_variables(det, path)
+    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    out = export_camera(det, variables, args.out, source={"weights": str(path), "command": command},
+                        input_hw=input_hw)
+    print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))
+    return 0
+
+
+def quantize(args) -> int:
+    """`dsfec quantize` of a camera export: static INT8 calibrated on letterboxed street train images."""
+    from .data.camera.sources import load_camera_images
+    from .deploy.quantize_camera import quantize_camera
+
+    try:
+        out = quantize_camera(args.onnx, args.out, load_camera_images("street", "train", args.calib_frames, args.seed),
+                              calibration=args.calibration)
+    except ValueError as err:  # an export that takes other images than the street frames' rectangle
+        sys.exit(f"dsfec quantize: {err}")
+    print(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in out.items()}, indent=2))
+    return 0

@@ -2,7 +2,7 @@
 Shuffle-YOLOv3 on two street frames at 64 px (the compiles dominate: one train step size, one
 inference program shared by validation, eval and ship through the tests' compilation cache), the
 classes a street-trained model takes from its run when scored on real VOC images, the files predict
-writes, and the commands the family does not have yet refusing by name."""
+writes, and what the commands refuse, by name (export, quantize and bench: tests/deploy/test_deploy_camera.py)."""
 
 from __future__ import annotations
 
@@ -73,14 +73,12 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv,message", [
-    (["export", "--model", "shuffle_yolov3", "--out", "x"], "ONNX export is not implemented for the camera"),
-    (["bench", "--models", "yolov3_darknet53"], "camera models"),
-    (["bench", "--train", "--models", "shuffle_yolov3"], "camera models"),
+    (["export", "--model", "shuffle_yolov3", "--out", "x"], "pass --weights"),  # no camera weights are shipped
     (["train", "--model", "shuffle_yolov3", "--window", "64", "--run-dir", "x"], "--window applies to point-cloud"),
     (["train", "--model", "dsfec_s", "--sizes", "320,416", "--run-dir", "x"], "--sizes and --size apply to camera"),
     (["eval", "--model", "yolov8n", "--size", "416"], "--size applies to camera models"),
     (["eval", "--model", "shuffle_yolov3", "--data", "voc:/nonexistent"], "voc:DIR with an existing folder"),
-    (["eval", "--model", "shuffle_yolov3", "--runtime", "onnx"], "JAX only"),
+    (["eval", "--model", "shuffle_yolov3", "--runtime", "onnx"], "--runtime onnx needs --onnx DIR"),
     (["train", "--model", "shuffle_yolov3", "--sizes", "300,416", "--run-dir", "x"], "multiples of 32"),
     (["eval", "--model", "shuffle_yolov3", "--size", "400"], "--size 400: expected a multiple of 32"),
 ])

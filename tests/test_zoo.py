@@ -151,6 +151,15 @@ def test_every_shipped_weights_file_loads_and_records_how_it_was_made(path):
         out = zoo.load(path.stem, predictor_options={"representation": tiny})(sample)
         assert len(out) and np.isfinite(out.scores).all() and out.xyxy.max() <= max(sample.shape)
         return
+    if family.modality == "image":  # an image in, 2D boxes in its pixels out (letterboxed small: a cheap compile)
+        from dsfec_jax.data.camera.sources import load_camera_images
+
+        image = load_camera_images("street", "val", 1)[0]
+        out = zoo.load(path.stem, predictor_options={"size": 96, "score_threshold": 0.0})(image)
+        h, w = image.hw
+        assert len(out) and np.isfinite(out.scores).all() and (out.xyxy[:, 2] <= w).all() and (out.xyxy[:, 3] <= h).all()
+        assert set(out.names) <= set(manifest["training"]["overrides"]["class_names"])
+        return
     predictor = zoo.load(path.stem, grid=TINY_GRID, max_pillars=96)  # weights fit any grid
     rng = np.random.default_rng(0)
     points = np.column_stack([rng.uniform(0, 16, 50), rng.uniform(-8, 8, 50), rng.normal(0, 1, (50, 5))])

@@ -9,8 +9,10 @@ host work is not in the device figures. A family whose network takes the window'
 input (Family.origin_input) trains every window with one network, so its batches come from
 several windows; the others compile one step per window (all of one shape), so their batches
 all come from the first window. Range-Doppler models (modality 'rd') train on whole RD maps
-made as train/fit_rd.py makes them (training_rd.py); the point settings (window, pillar slots) do not
-apply to them, so one `--models` list may hold both kinds.
+made as train/fit_rd.py makes them (training_rd.py), and camera models (modality 'image') on
+letterboxed street images made as train/fit_camera.py makes them (training_camera.py: one input
+size, `Settings.image_size` on the long side, 256 x 416 at the default 416); the point settings
+(window, pillar slots) apply to neither, so one `--models` list may hold every kind.
 
 Each timed program is compiled ahead (`jax.jit(f).lower(...).compile()`, timed: the compile
 time), then every program of every config, and the two sgemm references (XLA's and numpy's
@@ -49,7 +51,7 @@ from .. import zoo
 from ..core import atomic
 from ..core import threads as thread_control
 from ..core.defaults import RUN_PILLARS
-from . import counting, op_breakdown, training_rd
+from . import counting, op_breakdown, training_camera, training_rd
 
 PROGRAMS = ("eval_forward", "train_forward", "fwd_bwd", "step")
 SGEMM_N = 2048
@@ -70,6 +72,7 @@ PEAK_CONVENTION = (f"the faster of two {SGEMM_N} x {SGEMM_N} float32 matmuls (2 
 
 
 BUDGET_FRAMES = 400  # train frames the pillar budget is sized on: the quick search recipe's count
+IMAGE_SIZE = 416  # camera models: the long side of the letterboxed training images (the paper's input)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,7 +80,8 @@ class Settings:
     """What is measured: `batch` frames per step on `window`-cell training windows (None: the
     whole grid) with at most `max_pillars` slots (sized to the data as training does unless
     `size_pillars` is False; these four fields are the point families', range-Doppler models
-    train on whole maps); `repeats` timed repetitions after `warmup`; the timed
+    train on whole maps); camera models train on images letterboxed to `image_size` on their long
+    side; `repeats` timed repetitions after `warmup`; the timed
     calls cycle through `distinct_batches` pre-built batches; `profile_steps` steps are traced
     for the breakdown (none when `breakdown` is False)."""
 
@@ -92,6 +96,7 @@ class Settings:
     profile_steps: int = 3
     size_pillars: bool = True  # slots sized to the data as train.fit does; False: max_pillars slots
     budget_frames: int = BUDGET_FRAMES  # train frames the slots are sized on
+    image_size: int = IMAGE_SIZE  # camera models: the letterbox's long side (a multiple of 32)
 
     def __post_init__(self):
         for field, low in (("batch", 1), ("max_pillars", 1), ("repeats", 1), ("warmup", 0), ("budget_frames", 1),
@@ -101,6 +106,8 @@ class Settings:
                 raise ValueError(f"train bench: {field}={value!r}; expected an integer >= {low}")
         if self.window is not None and (not isinstance(self.window, int) or self.window < 1):
             raise ValueError(f"train bench: window={self.window!r}; expected cells >= 1, or None for the whole grid")
+        if not isinstance(self.image_size, int) or self.image_size < 32 or self.image_size % 32:
+            raise ValueError(f"train bench: image_size={self.image_size!r}; expected a positive multiple of 32")
 
 
 # ---- inputs -------------------------------------------------------------------------------------
@@ -109,16 +116,26 @@ def is_rd(name: str) -> bool:
     return zoo.family_of(name).modality == "rd"
 
 
+def is_camera(name: str) -> bool:
+    return zoo.family_of(name).modality == "image"
+
+
 def model_overrides(name: str, settings: Settings) -> dict:
-    """The config fields the settings set on model `name`: the pillar slots of a point model."""
+    """The config fields the settings set on model `name`: the pillar slots of a point model; a
+    camera model's classes are its benchmark's (training_camera.class_fields)."""
+    if is_camera(name):
+        return training_camera.class_fields()
     return {} if is_rd(name) else {"max_pillars": settings.max_pillars}
 
 
 def training_batches(name: str, overrides: dict, settings: Settings) -> tuple[zoo.Detector, list[dict], int]:
     """(the network a step trains, `distinct_batches` device batches {'inputs', 'targets'}, the
-    number of training windows), made as train/fit.py makes them (RD models: training_rd.py)."""
+    number of training windows), made as train/fit.py makes them (RD models: training_rd.py; camera
+    models: training_camera.py)."""
     if is_rd(name):
         return training_rd.training_batches(name, overrides, settings)
+    if is_camera(name):
+        return training_camera.training_batches(name, overrides, settings)
     from ..data.batches import BatchStream
     from ..data.points.augment import AugmentConfig
     from ..data.points.pillarize import PillarSpec
@@ -370,9 +387,6 @@ def check_models(models: list[str], settings: Settings, compare: dict | None) ->
     unknown = [m for m in models if m not in zoo.available()]
     if unknown:
         raise ValueError(f"unknown model(s) {unknown}; available: {zoo.available()}")
-    camera = [m for m in models if zoo.family_of(m).modality == "image"]
-    if camera:  # its batches (data/camera) are not wired into the bench yet
-        raise ValueError(f"{camera}: the training benchmark does not measure camera models yet")
     for name in models:
         for label, overrides in (("default config", {}), (f"--compare {_overrides_text(compare)}", compare or {})):
             try:
@@ -485,7 +499,7 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True) -> str:
                   f"{_slots_text(s)}, median of {s['repeats']} interleaved repetitions after "
                   f"{s['warmup']} warm-up. Analytic GFLOP/s count {content['flops_convention']}. Peak: "
                   f"{content['peak_convention']}. Record: `dsfec_jax/profile/records/train_bench.json`."
-                  + _rd_note(records, s)]
+                  + _rd_note(records, s) + _camera_note(records, s)]
     for r in records:
         for c in r["configs"]:
             if c.get("breakdown"):
@@ -504,6 +518,18 @@ def _rd_note(records: list[dict], settings: dict) -> str:
             f"{shape[1]} x {shape[2]} RD maps (heat and gray) of the synthetic RD benchmark, augmented and with "
             "padded box targets as train/fit_rd.py makes them; windows and pillar slots do not apply; the step is the "
             "family's quick schedule's (ultralytics' SGD summing gradients to a nominal batch of 64).")
+
+
+def _camera_note(records: list[dict], settings: dict) -> str:
+    """What differs for the camera records of a table ('' when it has none)."""
+    camera = [r for r in records if r.get("family") and zoo.FAMILIES[r["family"]].modality == "image"]
+    if not camera:
+        return ""
+    shape = next(iter(camera[0]["configs"][0]["input"].values()))
+    return (f" Camera models ({', '.join(r['model'] for r in camera)}): batch {settings['batch']} street train "
+            f"images letterboxed to {shape[1]} x {shape[2]} with darknet's augmentations and padded box targets as "
+            "train/fit_camera.py makes them (one input size, no multi-scale), the street benchmark's 5 classes; "
+            "windows and pillar slots do not apply; the step is the family's quick schedule's (AdamW).")
 
 
 def check_readme(readme: str | Path) -> str:

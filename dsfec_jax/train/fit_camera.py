@@ -12,9 +12,9 @@ unaugmented training images (train/precise_bn.py): with momentum 0.99 they lag f
 weights in a run of a few hundred steps, which then scores ~0 whatever it learnt.
 
 Multi-scale per profile (MULTI_SCALE, by schedule name): yolo3_paper trains as darknet does, 320-608
-every 10 batches; yolo3_quick 320-416 (each size costs a compile of the train step, ~50 s on one
-core of the 2-core CPU for Shuffle-YOLOv3, and the small sizes are the cheap ones); any other
-schedule at 416.
+every 10 batches and the last 200 batches at 608; yolo3_quick 320-416 (each size costs a compile of
+the train step, ~50 s on one core of the 2-core CPU for Shuffle-YOLOv3, and the small sizes are the
+cheap ones); any other schedule at 416.
 """
 
 from __future__ import annotations
@@ -25,9 +25,8 @@ from pathlib import Path
 from typing import Sequence
 
 from .. import zoo
-from ..core.provenance import jsonable
 from ..data.camera.augment import CameraAugment
-from ..data.camera.batches import DARKNET_SIZES, CameraBatchStream, MultiScale
+from ..data.camera.batches import DARKNET_FINAL_SIZE, DARKNET_SIZES, CameraBatchStream, MultiScale
 from ..data.camera.images import CameraImage
 from ..evaluate import validate as run_validation
 from ..models.camera.targets import DEFAULT_MAX_BOXES, pad_batch
@@ -36,7 +35,8 @@ from .loop import RunSpec, run_record, train
 from .precise_bn import precise_bn
 from .schedules import Schedule
 
-MULTI_SCALE = {"yolo3_paper": MultiScale(DARKNET_SIZES), "yolo3_quick": MultiScale.span(320, 416)}
+MULTI_SCALE = {"yolo3_paper": MultiScale(DARKNET_SIZES, final_size=DARKNET_FINAL_SIZE),
+               "yolo3_quick": MultiScale.span(320, 416)}
 FIXED_SIZE = MultiScale((416,))
 PRECISE_BN_IMAGES = 64  # training images the BN statistics are re-estimated on before a validation
 
@@ -58,13 +58,13 @@ def fit_camera(model: str, overrides: dict, images: Sequence[CameraImage], val: 
     re-estimated on `precise_bn_images` training images (0: not; rounded up to whole batches)."""
     det = zoo.create(model, **overrides)
     family = zoo.require_modality(det.config, "image", "fit_camera")
-    sizes = sizes or multi_scale_for(schedule)
+    total = steps or schedule.total_steps(len(images))
+    sizes = dataclasses.replace(sizes or multi_scale_for(schedule), total_steps=total)  # the final-size rule's end
     targets = functools.partial(pad_batch, class_names=det.config.classes, max_boxes=max_boxes)
     stream = CameraBatchStream(images, schedule.batch_size, seed, targets, CameraAugment() if augment else None, sizes)
-    total = steps or schedule.total_steps(len(images))
     spec = RunSpec(Path(run_dir), schedule, seed, total_steps=total, progress=progress)
     info = run_record(run_info, model, overrides, det.config, schedule, seed, total, stream.augment,
-                      train_images=len(images), val_images=len(val), multi_scale=jsonable(dataclasses.asdict(sizes)),
+                      train_images=len(images), val_images=len(val), multi_scale=sizes.record(),
                       aspect=stream.aspect, eval_size=eval_size, max_boxes=max_boxes,
                       precise_bn_images=precise_bn_images)
 
@@ -74,15 +74,24 @@ def fit_camera(model: str, overrides: dict, images: Sequence[CameraImage], val: 
         predictor.variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
         return run_validation(family.metric.name, predictor, val)[0]
 
-    # BN statistics re-estimated before each validation on unaugmented training images at the
-    # evaluation size (train/precise_bn.py: the running ones lag far behind in short runs)
-    calibration = CameraBatchStream(images, schedule.batch_size, seed, targets, None, MultiScale((eval_size,)),
-                                    stream.aspect)
-    count = min(-(-precise_bn_images // schedule.batch_size), calibration.per_epoch)
-    recalibrate = precise_bn(det, lambda: [calibration.batch(k) for k in range(count)]) if count else None
+    # BN statistics re-estimated before each validation (train/precise_bn.py: the running ones lag
+    # far behind in short runs)
+    recalibrate = bn_recalibration(det, images, schedule.batch_size, seed, eval_size, precise_bn_images,
+                                   max_boxes, stream.aspect)
     state, scores = train(det, stream, spec, info, validate, eval_every or total, init_variables=init_variables,
                           best_key=family.metric.headline, before_eval=recalibrate)
     if scores is None:  # a finished run resumed: nothing trained (re-estimating again gives the same statistics)
         state = recalibrate(state) if recalibrate else state
         scores = validate(state)
     return det, state, scores
+
+
+def bn_recalibration(det, images: Sequence[CameraImage], batch_size: int, seed: int, eval_size: int,
+                     count_images: int = PRECISE_BN_IMAGES, max_boxes: int = DEFAULT_MAX_BOXES,
+                     aspect: float | None = None):
+    """fn(state) -> state with BN statistics re-estimated on the first `count_images` (rounded up
+    to whole batches) of `images`, unaugmented, letterboxed at the evaluation size; None for 0."""
+    targets = functools.partial(pad_batch, class_names=det.config.classes, max_boxes=max_boxes)
+    calibration = CameraBatchStream(images, batch_size, seed, targets, None, MultiScale((eval_size,)), aspect)
+    count = min(-(-count_images // batch_size), calibration.per_epoch)
+    return precise_bn(det, lambda: [calibration.batch(k) for k in range(count)]) if count else None

@@ -19,6 +19,7 @@ from dsfec_jax.data.camera.batches import CameraBatchStream, MultiScale
 from dsfec_jax.data.camera.sources import load_camera_images
 from dsfec_jax.models.camera import family as camera_family
 from dsfec_jax.models.camera.targets import pad_batch
+from dsfec_jax.train.fit_camera import multi_scale_for
 from dsfec_jax.train.loop import RunSpec, train
 from dsfec_jax.train.schedules import get_schedule, learning_rate, optimizer
 
@@ -81,6 +82,8 @@ def test_the_paper_schedule_is_yolov3_voc_cfg():
         updates, state = tx.update(zero, state, params)
     assert float(updates["conv"]["kernel"][0, 0, 0, 0]) < 0  # kernels decay
     assert float(updates["conv"]["bias"][0]) == 0 and float(updates["bn"]["scale"][0]) == 0  # biases, BN do not
+    paper = multi_scale_for(s)  # darknet's random=1: 320..608 every 10 batches, the last 200 at 608
+    assert paper.sizes == tuple(range(320, 609, 32)) and (paper.every, paper.final_size, paper.final_steps) == (10, 608, 200)
 
 
 def test_precise_bn_makes_eval_mode_the_calibration_batchs_train_mode():

@@ -10,8 +10,10 @@ Multi-scale training (darknet's `random=1`: every 10 batches a new size, (rand()
 i.e. 320..608 in steps of 32): `MultiScale.size(seed, step)` draws the long side of the input from
 `sizes` once per block of `every` steps; the input is then `letterbox.network_shape(size, aspect)`
 (416 -> 416 x 256 for the 16:9 street frames). The jitted train step is cached by input shape, so
-each size compiles once and is reused whenever it comes back. (darknet also pins the last 200
-batches to 608; not done here.)
+each size compiles once and is reused whenever it comes back. darknet also pins the end of the run
+to 608: at a switch, `if (get_current_batch(net)+200 > net->max_batches) dim = 608;`
+(pjreddie/darknet examples/detector.c train_detector); `MultiScale(final_size=608)` with the run's
+`total_steps` does the same (the `paper` profile; train/fit_camera sets total_steps).
 
 Arrays (numpy; B = batch size, M = max boxes, (H, W) = this step's input):
   image (B, H, W, 3) float32 in [0, 1]: the letterboxed, augmented images (the network's input);
@@ -39,17 +41,30 @@ TARGET_KEYS = ("gt_boxes", "gt_labels", "gt_mask")
 ORDER_TAG, AUGMENT_TAG, SIZE_TAG = 0, 1, 2
 DARKNET_SIZES = tuple(range(320, 609, STRIDE))  # yolov3's random=1: 320, 352, ..., 608
 DARKNET_EVERY = 10
+DARKNET_FINAL_SIZE, DARKNET_FINAL_STEPS = 608, 200  # the run's last 200 batches at 608 (detector.c)
 
 
 @dataclasses.dataclass(frozen=True)
 class MultiScale:
-    """The long side of the input: drawn from `sizes` for each block of `every` steps."""
+    """The long side of the input: drawn from `sizes` for each block of `every` steps; with
+    `final_size`, a block that starts less than `final_steps` before `total_steps` takes it."""
     sizes: tuple[int, ...] = (416,)
     every: int = DARKNET_EVERY
+    final_size: int | None = None
+    final_steps: int = DARKNET_FINAL_STEPS
+    total_steps: int | None = None
 
     def __post_init__(self):
-        if not self.sizes or any(int(s) % STRIDE or int(s) < STRIDE for s in self.sizes) or self.every < 1:
+        sizes = self.sizes + ((self.final_size,) if self.final_size is not None else ())
+        if not self.sizes or any(int(s) % STRIDE or int(s) < STRIDE for s in sizes) or self.every < 1:
             raise ValueError(f"MultiScale: sizes must be positive multiples of {STRIDE} and every >= 1; got {self}")
+
+    def record(self) -> dict:
+        """What a run records: sizes and every, and the final-size rule where there is one."""
+        out = {"sizes": [int(s) for s in self.sizes], "every": self.every}
+        if self.final_size is not None:
+            out.update(final_size=self.final_size, final_steps=self.final_steps, total_steps=self.total_steps)
+        return out
 
     @classmethod
     def span(cls, low: int, high: int, every: int = DARKNET_EVERY) -> "MultiScale":
@@ -57,6 +72,10 @@ class MultiScale:
         return cls(tuple(range(low, high + 1, STRIDE)), every)
 
     def size(self, seed: int, step: int) -> int:
+        block_start = int(step) // self.every * self.every
+        if self.final_size is not None and self.total_steps is not None \
+                and block_start + self.final_steps > self.total_steps:
+            return int(self.final_size)
         if len(self.sizes) == 1:
             return int(self.sizes[0])
         rng = np.random.default_rng([int(seed), SIZE_TAG, int(step) // self.every])

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 
 # (model, its base) -> the ratio's label: what a variant costs over the model it extends
-PAIRS = {("dsfec_s", "baseline"): "DSFEC-S / Baseline", ("yolov8n_adapter", "yolov8n"): "YOLOv8n-Adapter / YOLOv8n"}
+PAIRS = {("dsfec_s", "baseline"): "DSFEC-S / Baseline", ("yolov8n_adapter", "yolov8n"): "YOLOv8n-Adapter / YOLOv8n",
+         ("shuffle_yolov3", "yolov3_darknet53"): "Shuffle-YOLOv3 / Darknet53-YOLOv3"}
 
 
 def stages_of(records: list[dict]) -> list[str]:

@@ -66,6 +66,20 @@ def onnx_graphs(det, variables, predictor, workdir: Path, int8: bool, calib_poin
     return {"network": net_path, "decode": dec_path}
 
 
+def cached_export(workdir: Path, tag: str, export, quantize, int8: bool) -> Path:
+    """WORKDIR/TAG (written once per worker by `export(dir)`), or its INT8 copy WORKDIR/TAG_int8
+    (`quantize(fp32_dir, int8_dir)`): one worker's runtimes share the files."""
+    fp32 = workdir / tag
+    if not (fp32 / "model.onnx").exists():
+        export(fp32)
+    if not int8:
+        return fp32
+    int8_dir = workdir / f"{tag}_int8"
+    if not (int8_dir / "model.onnx").exists():
+        quantize(fp32, int8_dir)
+    return int8_dir
+
+
 def ort_stages(paths: dict, threads: int) -> dict:
     from ..ort import ort_session
 
@@ -75,12 +89,13 @@ def ort_stages(paths: dict, threads: int) -> dict:
             "decode": lambda maps: dec.run(None, dict(zip(names, maps)))}
 
 
-def jax_throughput(det, variables, fn, repeats: int) -> dict:
+def jax_throughput(det, variables, fn, repeats: int, hw: tuple[int, int] | None = None) -> dict:
     """Frames/s of the jitted fn(variables, inputs) (network + decode; + NMS for an RD model, whose
-    predictor compiles it) at each batch size (batch 1 .. 8) -> {batch: fps}."""
+    predictor compiles it) at each batch size (batch 1 .. 8) -> {batch: fps}. `hw`: the input size of
+    the models whose dummy inputs take one (camera images: the bench's letterboxed size)."""
     out = {}
     for b in JAX_BATCHES:
-        x = det.dummy_inputs(b, occupancy=0.25)
+        x = det.dummy_inputs(b, occupancy=0.25) if hw is None else det.config.dummy_inputs(b, hw=tuple(hw))
         jax.block_until_ready(fn(variables, x))
         times = []
         for _ in range(max(3, repeats // b)):

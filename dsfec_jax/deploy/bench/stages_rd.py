@@ -14,6 +14,8 @@ from pathlib import Path
 
 import jax
 
+from .stages import cached_export
+
 CALIBRATION_SAMPLES = 32  # synthetic train RD samples, seed 0, as the point bench's 32 frames
 
 
@@ -51,15 +53,11 @@ def rd_onnx_graph(det, variables, workdir: Path, int8: bool, input_hw) -> Path:
     from ..export_rd import export_rd
     from ..quantize_rd import quantize_rd
 
-    fp32 = workdir / f"{det.name}_rd"
-    if not (fp32 / "model.onnx").exists():
-        export_rd(det, variables, fp32, input_hw=tuple(input_hw), jax_export=False)
-    if not int8:
-        return fp32
-    int8_dir = workdir / f"{det.name}_rd_int8"
-    if not (int8_dir / "model.onnx").exists():
-        quantize_rd(fp32, int8_dir, load_rd_samples("synthetic", "train", CALIBRATION_SAMPLES, seed=0))
-    return int8_dir
+    return cached_export(workdir, f"{det.name}_rd",
+                         lambda out: export_rd(det, variables, out, input_hw=tuple(input_hw), jax_export=False),
+                         lambda fp32, out: quantize_rd(fp32, out, load_rd_samples("synthetic", "train",
+                                                                                   CALIBRATION_SAMPLES, seed=0)),
+                         int8)
 
 
 def rd_ort_stages(export_dir: Path, threads: int) -> dict:

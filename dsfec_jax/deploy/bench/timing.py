@@ -3,10 +3,12 @@
 Point models (STAGES): pillarize (host numpy), network (pillar net .. heads), decode (sigmoid, PIXOR
 decode, top-k per head), nms (host, rotated, per class). Range-Doppler models (RD_STAGES):
 representation (host numpy: the heat / gray maps fitted to the input size), network_decode (network
-and DFL decode), nms (class-aware NMS, or YOLOv10's top-k). Every runtime runs the same chain on the
-same frame; within each repeat the models and runtimes alternate (A B C A B C ...) rather than
-running one after the other, so a slow spell of a noisy shared machine hits them all alike and
-their ratios hold.
+and DFL decode), nms (class-aware NMS, or YOLOv10's top-k). Camera models (CAMERA_STAGES): letterbox
+(host: the image scaled and centred into the network input), network_decode (network and YOLOv3
+decode), nms (darknet's host post-processing and the boxes mapped back to the image). Every runtime
+runs the same chain on the same frame; within each repeat the models and runtimes alternate
+(A B C A B C ...) rather than running one after the other, so a slow spell of a noisy shared
+machine hits them all alike and their ratios hold.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import time
 
 STAGES = ("pillarize", "network", "decode", "nms")
 RD_STAGES = ("representation", "network_decode", "nms")
+CAMERA_STAGES = ("letterbox", "network_decode", "nms")
 
 
 def chain(points, spec, stages: dict, predictor) -> list:
@@ -35,6 +38,21 @@ def rd_chain(sample, representation, input_names, stages: dict) -> list:
         return {k: maps[k][None] for k in input_names}
 
     return [("representation", represent), ("network_decode", stages["network_decode"]), ("nms", stages["nms"])]
+
+
+def camera_chain(image, pipeline) -> list:
+    """[(stage, fn(previous output) -> output)] from a CameraImage to its Boxes2D in image pixels,
+    through a predict_camera.CameraPipeline (the JAX predictor or the ONNX Runtime one)."""
+    from ...data.camera.letterbox import letterbox
+
+    input_hw = pipeline.input_hw(image.hw)
+    affine = letterbox(image.hw, input_hw)  # the map the letterbox stage applies (eval_input's)
+
+    def nms(out):
+        return pipeline.in_image(pipeline.postprocess(*out)[0], affine, image.hw)
+
+    return [("letterbox", lambda _: pipeline.letterboxed([image], input_hw)[0]),
+            ("network_decode", pipeline.decoded), ("nms", nms)]
 
 
 def time_chains(chains: dict, repeats: int, warmup: int) -> dict:

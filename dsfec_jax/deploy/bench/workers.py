@@ -1,5 +1,6 @@
 """One worker process per thread count, and `run`, which launches them and gathers their records;
-`point_chains` / `rd_chains` build each model's chains by the modality its family reads.
+`point_chains` / `rd_chains` / `camera_chains` build each model's chains by the modality its family
+reads.
 
 XLA has no thread-count flag and sizes its pool from the CPUs it may use when it starts, so each
 --threads value N runs in its own worker process (`python -m dsfec_jax.deploy.bench`) pinned to N
@@ -20,10 +21,11 @@ import jax
 import numpy as np
 
 from ...core import threads as thread_control
-from .model_setup import model_setup, rd_model_setup
+from .model_setup import camera_model_setup, model_setup, rd_model_setup
 from .stages import jax_stages, jax_throughput, onnx_graphs, ort_stages
+from .stages_camera import camera_pipeline
 from .stages_rd import rd_jax_stages, rd_onnx_graph, rd_ort_stages
-from .timing import chain, rd_chain, time_chains
+from .timing import camera_chain, chain, rd_chain, time_chains
 
 POINT_CALIBRATION_FRAMES = 32  # synthetic train frames, seed 0
 
@@ -71,7 +73,30 @@ def rd_chains(name: str, runtimes: list[str], threads: int, workdir: Path, repea
     return out
 
 
-CHAINS = {"points": point_chains, "rd": rd_chains}  # modality -> its chains (camera models: not timed yet)
+CAMERA_SIZE = 416  # the long side camera images are letterboxed to (the paper's; street frames: 256 x 416)
+
+
+def camera_chains(name: str, runtimes: list[str], threads: int, workdir: Path, repeats: int,
+                  size: int = CAMERA_SIZE, overrides: dict | None = None) -> dict:
+    """runtime -> (chain of a camera model, record fields): one street test image letterboxed as
+    CameraPredictor letterboxes it at `size`, into one fixed-size graph for ONNX Runtime.
+    `overrides`: config fields (the tests' tiny networks)."""
+    from ...predict_camera import decoding_network, letterbox_shape
+
+    det, variables, label, image = camera_model_setup(name, size, overrides)
+    input_hw = letterbox_shape(size, True, image.hw)  # CameraPredictor's rectangle: 256 x 416 at 416
+    out = {}
+    for rt in runtimes:
+        pipeline = camera_pipeline(det, variables, rt, size, workdir, threads, input_hw)
+        out[rt] = (camera_chain(image, pipeline), {"weights": label, "input_hw": list(input_hw)})
+    if "jax" in out:
+        network = decoding_network(det)
+        out["jax"][1]["throughput_fps"] = jax_throughput(det, variables, jax.jit(lambda v, x: network(v, x["image"])),
+                                                         repeats, hw=input_hw)
+    return out
+
+
+CHAINS = {"points": point_chains, "rd": rd_chains, "image": camera_chains}  # modality -> its chains
 
 
 def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, warmup: int) -> list[dict]:

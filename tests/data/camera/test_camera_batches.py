@@ -152,6 +152,20 @@ def test_multi_scale_sizes_are_darknets_and_drawn_per_block():
         MultiScale((100,))
 
 
+def test_the_last_200_batches_run_at_608_as_darknets_detector_c():
+    # a switch at block start b pins 608 when b + 200 > max_batches: blocks from 810 of 1000 on
+    ms = MultiScale(DARKNET_SIZES, final_size=608, total_steps=1000)
+    sizes = [ms.size(seed=0, step=k) for k in range(1000)]
+    assert set(sizes[810:]) == {608} and sizes[:800] == [MultiScale(DARKNET_SIZES).size(0, k) for k in range(800)]
+    assert set(sizes[800:810]) != {608} or MultiScale(DARKNET_SIZES).size(0, 800) == 608
+    assert MultiScale(DARKNET_SIZES, final_size=608).size(0, 999) == MultiScale(DARKNET_SIZES).size(0, 999)  # no end
+    assert ms.record() == {"sizes": list(DARKNET_SIZES), "every": 10, "final_size": 608, "final_steps": 200,
+                           "total_steps": 1000}
+    assert MultiScale((64,)).record() == {"sizes": [64], "every": 10}
+    with pytest.raises(ValueError, match="multiples of 32"):
+        MultiScale((416,), final_size=600)
+
+
 def test_street_source_and_class_maps():
     images = load_camera_images("street", "val", 2, seed=0)
     assert len(images) == 2 and images[0].hw == (234, 416) and images[0].boxes.difficult is not None
