@@ -46,7 +46,7 @@ def test_the_camera_family_is_a_zoo_family():
     with pytest.raises(ValueError, match="class_names"):
         zoo.create("shuffle_yolov3", class_names=("car", "bus"))  # 2 names for 20 classes
     with pytest.raises(FileNotFoundError, match="ships no weights"):
-        zoo.load("shuffle_yolov3")
+        zoo.load("yolov3_darknet53")  # too costly to train on this CPU (README); Shuffle-YOLOv3's are shipped
 
 
 @pytest.mark.parametrize("name", sorted(PINNED_PARAMS))

@@ -100,8 +100,12 @@ def test_command_writes_markdown_and_a_provenance_record(tmp_path, capsys, monke
         {"row": "zero-shot (street weights)", "scores": {"mAP50": 1.0, "images": 50}},
         {"row": "fine-tuned 150 steps on the 50 tune images",
          "scores": {"mAP50": 21.5, "mAP50_all": 22.0, "images": 50, "classes": ["car", "person"], "AP50": {}}}]}))
+    profile = tmp_path / "profile.json"  # a 1-thread profile record, not the package's (which re-measuring changes)
+    profile.write_text(json.dumps({"command": "python -m dsfec_jax.profile", "records": [
+        {"model": m, "latency_ms": ms, "latency_setup": {"threads": 1, "cpu": "Profile CPU"}}
+        for m, ms in (("yolov3_darknet53", 772.8), ("shuffle_yolov3", 60.1))]}))
     out = tmp_path / "out"
-    assert tables.main(["--out", str(out), "--bench", str(bench), "--no-eval", "--seed", "3",
+    assert tables.main(["--out", str(out), "--bench", str(bench), "--no-eval", "--seed", "3", "--profile", str(profile),
                         "--eval", str(street_eval), "--finetune-eval", str(finetune)]) == 0
     printed = capsys.readouterr().out
     assert printed == (out / "camera_tables.md").read_text()
