@@ -73,7 +73,7 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv,message", [
-    (["export", "--model", "shuffle_yolov3", "--out", "x"], "pass --weights"),  # no camera weights are shipped
+    (["export", "--model", "yolov3_darknet53", "--out", "x"], "pass --weights"),  # Darknet53 ships no weights
     (["train", "--model", "shuffle_yolov3", "--window", "64", "--run-dir", "x"], "--window applies to point-cloud"),
     (["train", "--model", "dsfec_s", "--sizes", "320,416", "--run-dir", "x"], "--sizes and --size apply to camera"),
     (["eval", "--model", "yolov8n", "--size", "416"], "--size applies to camera models"),
