@@ -360,8 +360,7 @@ def ship_point_predictor(model: str, source: Path, info: dict):
     # measure with the pillar slots the run validated with (RadarNeXt runs set their own)
     max_pillars = info.get("overrides", {}).get("max_pillars", RUN_PILLARS)
     det = zoo.create(model, max_pillars=max_pillars)
-    variables = zoo.load_variables(det, source)
-    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    variables = zoo.model_variables(det, source)
     return Predictor(det, variables, score_threshold=POINT_SCORE_THRESHOLD), variables
 
 
@@ -411,8 +410,7 @@ def run_export(args) -> int:
     path = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
     if not path.is_file():
         sys.exit(f"no weights at {path}: pass --weights (a trained checkpoint or weights file)")
-    variables = zoo.load_variables(det, path)
-    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    variables = zoo.model_variables(det, path)
     out = export(det, variables, args.out, top_k=args.top_k or 100,
                  source={"weights": str(path), "command": command_line(args)})
     print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))

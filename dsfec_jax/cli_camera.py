@@ -44,7 +44,7 @@ from pathlib import Path
 from . import zoo
 from .cli_rd import refuse_point_flags
 from .models.camera.decode import EVAL_SCORE
-from .models.camera.family import FAMILY as CAMERA
+from .models.camera.family import FAMILY as CAMERA, class_fields
 
 READS = "whole camera images"
 EVAL_SIZE = 416  # eval / predict: the long side images are letterboxed to (the paper's 416)
@@ -81,8 +81,7 @@ def with_data_classes(args, overrides: dict) -> dict:
     """The model's classes for training on --data: the source's, unless --set names them."""
     if any(f in overrides for f in CLASS_FIELDS):
         return overrides
-    classes = _source_classes(args)
-    return {**overrides, "num_classes": len(classes), "class_names": tuple(classes)}
+    return {**overrides, **class_fields(_source_classes(args))}
 
 
 def eval_size(args) -> int:
@@ -214,8 +213,7 @@ def ship_predictor(model: str, source: Path, info: dict):
     from .predict_camera import CameraPredictor
 
     det = zoo.create(model, **{k: tuple(v) if isinstance(v, list) else v for k, v in info.get("overrides", {}).items()})
-    variables = zoo.load_variables(det, source)
-    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    variables = zoo.model_variables(det, source)
     return CameraPredictor(det, variables, size=info.get("eval_size", 416)), variables
 
 
@@ -249,8 +247,7 @@ def export(args, overrides: dict, command: str) -> int:
         det = zoo.create(args.model, **{**zoo.trained_fields(path, CLASS_FIELDS), **overrides})
     except (TypeError, ValueError) as err:
         sys.exit(f"--set: {err}")
-    variables = zoo.load_variables(det, path)
-    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    variables = zoo.model_variables(det, path)
     out = export_camera(det, variables, args.out, source={"weights": str(path), "command": command},
                         input_hw=input_hw)
     print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))

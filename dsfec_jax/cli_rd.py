@@ -170,8 +170,7 @@ def ship_predictor(model: str, source: Path, info: dict):
     from .predict_rd import RDPredictor
 
     det = zoo.create(model, **info.get("overrides", {}))
-    variables = zoo.load_variables(det, source)
-    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    variables = zoo.model_variables(det, source)
     return RDPredictor(det, variables, _representation(info)), variables
 
 
@@ -195,8 +194,7 @@ def export(args, overrides: dict, command: str) -> int:
     from .deploy.export_rd import export_rd
 
     det = zoo.create(args.model, **overrides)
-    variables = zoo.load_variables(det, path)
-    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    variables = zoo.model_variables(det, path)
     out = export_rd(det, variables, args.out, source={"weights": str(path), "command": command}, **size)
     print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))
     return 0

@@ -153,6 +153,13 @@ def load_variables(detector: Detector, path: str | Path) -> dict:
                                   **{k: v for k, v in raw.items() if k not in ("params", "batch_stats")}})
 
 
+def model_variables(detector: Detector, path: str | Path) -> dict:
+    """{'params', 'batch_stats'} of a weights file or checkpoint (load_variables without the
+    optimizer state and step a training checkpoint also holds): what a predictor or export runs."""
+    variables = load_variables(detector, path)
+    return {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+
+
 def trained_fields(path: str | Path, fields) -> dict:
     """The values of config `fields` in the training record of a weights file: its manifest's
     "training" (shipped weights, `dsfec ship`), else the run.json of the run directory a checkpoint
@@ -185,8 +192,7 @@ def load(name: str, /, weights: str | Path | None = None, predictor_options: dic
     if not path.is_file():
         raise FileNotFoundError(f"no weights at {path}" + ("" if weights else f": {name!r} ships no weights yet; "
                                 f"train with `dsfec train --model {name}` and pass --weights"))
-    variables = load_variables(detector, path)
-    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    variables = model_variables(detector, path)
     modality = family_of(detector.config).modality
     if modality == "rd":
         from .predict_rd import RDPredictor

@@ -41,6 +41,7 @@ from pathlib import Path
 
 from dsfec_jax import zoo
 from dsfec_jax.core.atomic import write_json, write_text
+from dsfec_jax.core.checkpoint import manifest_path
 from dsfec_jax.core.environment import environment
 from dsfec_jax.models.camera import paper  # the paper's numbers, one constant per table, each citing it
 from dsfec_jax.models.camera.footprint import footprint
@@ -154,7 +155,7 @@ def parse_weights(items: list[str]) -> dict[str, Path]:
 
 def manifest_test(weights: Path) -> dict | None:
     """The measured street test figures in a shipped weights file's manifest (None without)."""
-    path = Path(str(weights) + ".json")
+    path = manifest_path(weights)
     measured = json.loads(path.read_text()).get("measured", {}) if path.is_file() else {}
     return {**measured["test"], "source": f"manifest {shown(path)}"} if "test" in measured else None
 

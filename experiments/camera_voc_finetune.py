@@ -40,6 +40,8 @@ from dsfec_jax.predict_camera import CameraPredictor
 from dsfec_jax.train.fit_camera import bn_recalibration, fit_camera
 from dsfec_jax.train.schedules import get_schedule
 
+from experiments.common import fmt
+
 MODEL = "shuffle_yolov3"
 VOC_DIR = Path("../shared/data/voc_review_od_metrics/data/database")
 EVAL_SIZE = 416  # the long side images are letterboxed to (the paper's 416)
@@ -96,10 +98,6 @@ def table(rows: list[dict], tune: int, held: int) -> str:
     return "\n".join(lines) + "\n"
 
 
-def fmt(v) -> str:
-    return "-" if v is None else f"{v:.2f}"
-
-
 def parse(argv):
     p = argparse.ArgumentParser(prog="python -m experiments.camera_voc_finetune", description=__doc__.split("\n\n")[0])
     p.add_argument("--weights", default=None, help="street-trained weights (default: the zoo's shipped ones)")
@@ -120,8 +118,7 @@ def main(argv=None) -> int:
     weights = Path(args.weights) if args.weights else zoo.shipped_weights(MODEL)
     overrides = zoo.trained_fields(weights, CAMERA.weight_fields)
     det = zoo.create(MODEL, **overrides)
-    variables = zoo.load_variables(det, weights)
-    variables = {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    variables = zoo.model_variables(det, weights)
     data = f"voc:{args.voc}"
     mapping = class_map(det.config.classes, source_classes(data))  # model class -> VOC class
     tune, held_out = split_by_id(load_camera_images(data, "all"), args.tune_images)

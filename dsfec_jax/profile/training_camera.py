@@ -24,9 +24,9 @@ from .. import zoo
 def class_fields() -> dict:
     """num_classes and class_names of the street benchmark (the fields `dsfec train` sets from it)."""
     from ..data.camera.sources import source_classes
+    from ..models.camera.family import class_fields as fields_of
 
-    classes = source_classes("street")
-    return {"num_classes": len(classes), "class_names": tuple(classes)}
+    return fields_of(source_classes("street"))
 
 
 def training_batches(name: str, overrides: dict, settings) -> tuple[zoo.Detector, list[dict], int]:

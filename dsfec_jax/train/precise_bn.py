@@ -9,7 +9,7 @@ early, very different weights' statistics most of the rest: 13 % after the camer
 Over a 50k-step schedule the two agree; re-estimating costs a few forward passes.
 
 The statistics of each batch are read from one train-mode forward with zeroed running statistics
-(flax stores m * 0 + (1 - m) * batch: exact, no cancellation) and averaged over the batches, as
+(models/bn_statistics.py: exact, no cancellation) and averaged over the batches, as
 update_bn_stats averages them. Only 'batch_stats' changes; a train-mode step never reads it, so
 the training that follows is the same.
 """
@@ -22,20 +22,20 @@ import jax
 import jax.numpy as jnp
 
 from ..layers.conv import BN_MOMENTUM
+from ..models.bn_statistics import batch_statistics
 
 
 def precise_bn(detector, batches: Callable[[], Sequence[dict]], momentum: float = BN_MOMENTUM) -> Callable[[dict], dict]:
     """fn(train state) -> the state with 'batch_stats' = the mean batch statistics of `batches()`
     (BatchStream-layout batches; made when first needed) under the state's parameters."""
-    stats_of = jax.jit(lambda v, x: detector.apply(v, x, train=True)[1]["batch_stats"])
+    stats_of = batch_statistics(detector, momentum)
     made: list = []
 
     def apply(state: dict) -> dict:
         if not made:
             made.extend(batches())
-        zeros = jax.tree.map(jnp.zeros_like, state["batch_stats"])
-        per_batch = [stats_of({"params": state["params"], "batch_stats": zeros}, b["inputs"]) for b in made]
-        mean = jax.tree.map(lambda *s: jnp.mean(jnp.stack(s), 0) / (1 - momentum), *per_batch)
+        per_batch = [stats_of(state, b["inputs"]) for b in made]
+        mean = jax.tree.map(lambda *s: jnp.mean(jnp.stack(s), 0), *per_batch)
         return {**state, "batch_stats": mean}
 
     return apply

@@ -16,7 +16,6 @@ a few street train images (as train/precise_bn.py re-estimates them), a trained 
 from __future__ import annotations
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 
@@ -60,15 +59,11 @@ CAMERA_BN_IMAGES = 4  # street train images the stand-in variables' batch statis
 
 
 def measured_batch_stats(det, variables: dict, images: np.ndarray) -> dict:
-    """`variables` with 'batch_stats' = the batch statistics of one train-mode forward on `images`:
-    train/precise_bn.py's estimate, written out here because deploy's doors lead to models, boxes and
-    data, not train (flax stores m * 0 + (1 - m) * batch when the running statistics start at zero)."""
-    from ...layers.conv import BN_MOMENTUM
+    """`variables` with 'batch_stats' = the batch statistics of one train-mode forward on `images`
+    (models/bn_statistics.py, train/precise_bn.py's estimate from one batch)."""
+    from ...models.bn_statistics import batch_statistics
 
-    zeros = jax.tree.map(jnp.zeros_like, variables["batch_stats"])
-    forward = jax.jit(lambda v, x: det.apply(v, {"image": x}, train=True)[1]["batch_stats"])
-    stats = forward({"params": variables["params"], "batch_stats": zeros}, images)
-    return {"params": variables["params"], "batch_stats": jax.tree.map(lambda s: s / (1 - BN_MOMENTUM), stats)}
+    return {"params": variables["params"], "batch_stats": batch_statistics(det)(variables, {"image": images})}
 
 
 def camera_model_setup(name: str, size: int, overrides: dict | None = None):
@@ -79,9 +74,9 @@ def camera_model_setup(name: str, size: int, overrides: dict | None = None):
     from ...data.camera.batches import eval_input
     from ...data.camera.letterbox import network_shape
     from ...data.camera.sources import load_camera_images, source_classes
+    from ...models.camera.family import class_fields
 
-    classes = source_classes("street")
-    fields = {"num_classes": len(classes), "class_names": tuple(classes),
+    fields = {**class_fields(source_classes("street")),
               **zoo.trained_fields(zoo.shipped_weights(name), zoo.family_of(name).weight_fields), **(overrides or {})}
     det = zoo.create(name, **fields)
     variables, label = bench_variables(det, name)

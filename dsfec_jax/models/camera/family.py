@@ -49,3 +49,10 @@ FAMILY = Family(
     stem_memory=paper_memory_mib, memory_convention=MEMORY_CONVENTION,
     weight_fields=("num_classes", "class_names"),  # `dsfec train` takes them from the data (cli_camera)
 )
+
+
+def class_fields(classes) -> dict:
+    """The config fields (FAMILY.weight_fields) that give a camera model these classes: what `dsfec
+    train` sets from its data's class names."""
+    classes = tuple(classes)
+    return {"num_classes": len(classes), "class_names": classes}
