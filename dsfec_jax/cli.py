@@ -1,4 +1,5 @@
-"""`dsfec train | eval | predict | ship | export | quantize | bench` (also `python -m dsfec_jax ...`):
+"""`dsfec train | eval | predict | ship | export | quantize | bench | edge | serve | depth` (also
+`python -m dsfec_jax ...`; the last three: cli_edge):
 thin commands over the library, the same flags for every family.
 
     dsfec train   --model dsfec_s [--set stem_filters=16] [--data synthetic] [--schedule quick] --run-dir runs/s
@@ -25,6 +26,7 @@ import sys
 from pathlib import Path
 
 from .argtypes import non_negative_int, positive_int
+from .cli_edge import EDGE_COMMANDS, add_commands as add_edge_commands
 from .core.defaults import RUN_PILLARS
 
 POINT_SCORE_THRESHOLD = 0.05  # eval/predict of point-cloud models (RD models: cli_rd, the paper's 0.001)
@@ -170,6 +172,7 @@ def parse(argv=None) -> argparse.Namespace:
                            help="predicted boxes drawn on the PNGs score at least this (default: points every "
                                 "detection kept; range-Doppler 0.25, ultralytics' predict default)")
             q.add_argument("--gt-out", default=None, help="also write the frames' ground truth in the same format")
+    add_edge_commands(sub)
     args = p.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)
     return args
@@ -524,6 +527,10 @@ def run_bench(args) -> int:
 
 def main(argv=None) -> int:
     args = parse(argv)
+    if args.command in EDGE_COMMANDS:
+        from . import cli_edge
+
+        return cli_edge.main(args)
     if args.command == "train":
         return run_train(args)
     if args.command == "ship":

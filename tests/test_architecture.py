@@ -16,6 +16,14 @@ NEVER = {
     "models": {"data", "train", "deploy", "metrics", "cli"},
     "data": {"models", "train", "cli"},
     "metrics": {"models", "train", "cli"},
+    # geodesy and placement sit on core alone: they know nothing of detectors or frames
+    "geo": {"layers", "boxes", "models", "data", "metrics", "train", "profile", "deploy", "zoo", "predict",
+            "predict_camera", "predict_depth", "evaluate", "edge", "service", "cli"},
+    # the map server stays light (no JAX, no models): it starts in a second and scales by itself
+    "service": {"layers", "boxes", "models", "data", "metrics", "train", "profile", "deploy", "zoo", "predict",
+                "predict_camera", "predict_depth", "evaluate", "edge", "cli"},
+    # an edge device and the server meet only over HTTP (the exchange format), never by import
+    "edge": {"train", "service", "cli"},
 }
 
 
@@ -49,6 +57,20 @@ def modules(room: str | None = None):
 def test_rooms_keep_their_never_rules(room):
     bad = {str(p.relative_to(PACKAGE)): sorted(project_imports(p) & NEVER[room]) for p in modules(room)}
     assert not {k: v for k, v in bad.items() if v}
+
+
+def test_the_map_service_never_imports_jax():
+    """The server process must not pay JAX's start-up and memory: no module of it imports jax/flax."""
+    heavy = {"jax", "flax", "optax", "onnxruntime"}
+    bad = {}
+    for path in modules("service"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module] if isinstance(node, ast.ImportFrom) and node.module and not node.level else [])
+            found = {n.split(".")[0] for n in names} & heavy
+            if found:
+                bad[str(path.relative_to(PACKAGE))] = sorted(found)
+    assert not bad
 
 
 def test_the_library_never_imports_cli_search_or_experiments():

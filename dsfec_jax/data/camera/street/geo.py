@@ -2,11 +2,13 @@
 
 Every world lives in one local East-North-Up frame whose origin is `StreetConfig.origin`
 (default Karlsruhe, 49.0069 N 8.4037 E, 115 m: KITTI's city), with the road on the plane U = 0.
-pymap3d.enu2geodetic / geodetic2enu convert (WGS84; reference-spec §2); the round trip is exact to
-far below a millimetre at these distances (tested to 1e-6 m). The GPS antenna sits at the camera,
-so a fix is the camera's position (U = camera height). Fixes come at `gps_hz` (1 Hz, as the
-paper's module) at t = 0, 1, 2, ... s of the drive; between fixes the paper interpolates
-linearly, which issue 25 does, against the exact per-frame poses recorded here.
+dsfec_jax.geo.geodesy converts through pymap3d (WGS84; reference-spec §2): `enu_to_geodetic` and
+`geodetic_to_enu` are its functions, re-exported here under the names this package has always
+used. The round trip is exact to far below a millimetre at these distances (tested to 1e-6 m).
+The GPS antenna sits at the camera, so a fix is the camera's position (U = camera height). Fixes
+come at `gps_hz` (1 Hz, as the paper's module) at t = 0, 1, 2, ... s of the drive; between fixes
+the paper interpolates linearly, which dsfec_jax.geo.gps does, against the exact per-frame poses
+recorded here.
 """
 
 from __future__ import annotations
@@ -14,20 +16,10 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import pymap3d
 
+from ....geo.geodesy import enu_to_geodetic, geodetic_to_enu
 
-def enu_to_geodetic(enu: np.ndarray, origin) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(..., 3) ENU metres -> (lat deg, lon deg, height m), float64."""
-    enu = np.asarray(enu, np.float64)
-    lat, lon, alt = pymap3d.enu2geodetic(enu[..., 0], enu[..., 1], enu[..., 2], *origin)
-    return np.asarray(lat, np.float64), np.asarray(lon, np.float64), np.asarray(alt, np.float64)
-
-
-def geodetic_to_enu(lat, lon, alt, origin) -> np.ndarray:
-    e, n, u = pymap3d.geodetic2enu(np.asarray(lat, np.float64), np.asarray(lon, np.float64),
-                                   np.asarray(alt, np.float64), *origin)
-    return np.stack([np.asarray(e), np.asarray(n), np.asarray(u)], -1)
+__all__ = ["EgoPose", "GpsTrack", "enu_to_geodetic", "geodetic_to_enu"]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,0 +1,179 @@
+"""`dsfec edge | serve | depth`: the paper's edge-to-server system (Fig. 2) and its depth network.
+
+    dsfec edge  --out runs/edge/drive0 [--drive-frames 300 --seed 0]            # the synthetic test drive
+    dsfec edge  --frames DIR --gps gps.csv --out OUT [--server http://127.0.0.1:8000] [--device cam-01]
+    dsfec serve --db runs/map.sqlite [--host 127.0.0.1 --port 8000]
+    dsfec depth train --run-dir runs/depth/monodepth_street --steps 1500 --frames 2000
+    dsfec depth eval  [--weights PATH] --frames 50
+
+`dsfec edge` runs detector -> depth -> placement on every frame (edge.pipeline), appends each frame's
+batch to OUT/batches.jsonl (a killed run resumes), posts it to --server through a disk queue
+(edge.uplink: an unreachable server loses nothing), and writes OUT/edge.geojson, edge.csv, edge.png
+and edge.json (per-stage times, frames/s, uplink counts). Without --frames it runs the street
+benchmark's synthetic drive, whose GPS fixes it uses unless --gps is given.
+--depth: network (the shipped monodepth weights, or --depth-weights), truth (the synthetic drive's
+exact depth), stereo:DIR (your disparity maps in pixels) or depth:DIR (your depth maps in metres),
+one <frame>.npy or 16-bit <frame>.png per frame. --a: the paper's adjustment coefficient in
+depth = b f / (a d) for the network's disparity d (a fraction of the width; default a = the image
+width, so a d is in pixels).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .argtypes import positive_int
+
+EDGE_COMMANDS = ("edge", "serve", "depth")
+DEPTH_WEIGHTS = Path(__file__).resolve().parent / "weights" / "monodepth_street.msgpack"
+
+
+def add_commands(sub) -> None:
+    e = sub.add_parser("edge", help="detector + monocular depth + GPS placement over frames; post to a map server")
+    e.add_argument("--frames", default=None, help="a folder of frames (times.csv, camera.json); default: the synthetic drive")
+    e.add_argument("--gps", default=None, help="GPS fixes, CSV time_s,lat,lon,alt or JSON (default: the drive's)")
+    e.add_argument("--fps", type=float, default=None, help="--frames without times.csv: the frame rate")
+    e.add_argument("--out", required=True, help="output folder (resumed if it holds a run)")
+    e.add_argument("--server", default=None, help="map service URL, e.g. http://127.0.0.1:8000")
+    e.add_argument("--device", default="edge-01")
+    e.add_argument("--model", default="shuffle_yolov3")
+    e.add_argument("--weights", default=None, help="detector weights (default: shipped)")
+    e.add_argument("--score-threshold", type=float, default=0.3, help="detections kept for placement")
+    e.add_argument("--depth", default="network", help="network | truth | stereo:DIR | depth:DIR")
+    e.add_argument("--depth-weights", default=None, help=f"monodepth weights (default {DEPTH_WEIGHTS.name}, shipped)")
+    e.add_argument("--a", type=float, default=None, help="adjustment coefficient a in depth = b f / (a d)")
+    e.add_argument("--baseline", type=float, default=None, help="stereo baseline b in metres (default: camera.json / 0.54)")
+    e.add_argument("--reference", default="center", choices=("center", "bottom_center"))
+    e.add_argument("--strict-gps", action="store_true", help="a bad GPS fix is an error (default: skipped and counted)")
+    e.add_argument("--threads", type=positive_int, default=None, help="pin to this many CPU threads")
+    e.add_argument("--drive-frames", type=positive_int, default=300, help="synthetic drive: frames (10 Hz)")
+    e.add_argument("--drive", type=int, default=0, help="synthetic drive: index in the test split")
+    e.add_argument("--seed", type=int, default=0)
+    s = sub.add_parser("serve", help="the map service: POST /detections, GET /objects, GET / (map page)")
+    s.add_argument("--db", required=True, help="SQLite database file (created if missing)")
+    s.add_argument("--host", default="127.0.0.1")
+    s.add_argument("--port", type=int, default=8000)
+    d = sub.add_parser("depth", help="train or evaluate the monodepth network on the street benchmark")
+    d.add_argument("action", choices=("train", "eval"))
+    d.add_argument("--run-dir", default=None)
+    d.add_argument("--steps", type=positive_int, default=1500)
+    d.add_argument("--frames", type=positive_int, default=None, help="train: rendered stereo pairs (2000); eval: test frames (50)")
+    d.add_argument("--batch-size", type=positive_int, default=8)
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--weights", default=None, help=f"eval: weights (default {DEPTH_WEIGHTS.name}, shipped)")
+    d.add_argument("--json", action="store_true")
+
+
+def main(args) -> int:
+    if getattr(args, "threads", None):
+        from .core import threads
+
+        threads.pin(args.threads)  # before XLA starts
+    if args.command == "serve":
+        from .service.server import serve
+
+        serve(args.db, args.host, args.port)
+        return 0
+    if args.command == "depth":
+        return run_depth(args)
+    return run_edge_command(args)
+
+
+def run_depth(args) -> int:
+    import json
+
+    if args.action == "train":
+        from .models.depth import MonodepthConfig
+        from .train.fit_depth import fit_depth
+
+        if not args.run_dir:
+            sys.exit("dsfec depth train: --run-dir is required")
+        _, info = fit_depth(args.run_dir, MonodepthConfig(), args.frames or 2000, args.steps, args.batch_size, args.seed)
+        print(json.dumps({k: v for k, v in info.items() if k != "losses"}, indent=1))
+        return 0
+    from .data.camera.street import StreetConfig, StreetDataset
+    from .predict_depth import load_depth_predictor
+    from .train.fit_depth import evaluate_dense
+
+    predictor = load_depth_predictor(args.weights or DEPTH_WEIGHTS)
+    scores = evaluate_dense(predictor, StreetDataset(StreetConfig(), "test", args.seed, args.frames or 50))
+    print(json.dumps(scores, indent=1) if args.json else "  ".join(f"{k} {v:.4f}" for k, v in scores.items()))
+    return 0
+
+
+def depth_source(args, baseline_m: float):
+    from .edge import depth_sources as ds
+
+    kind, _, where = args.depth.partition(":")
+    if kind == "network":
+        from .predict_depth import load_depth_predictor
+
+        return ds.NetworkDepth(load_depth_predictor(args.depth_weights or DEPTH_WEIGHTS), baseline_m, args.a)
+    if kind == "truth":
+        return ds.TruthDepth()
+    if kind in ("stereo", "depth") and where:
+        return ds.StereoDisparityFiles(where, baseline_m) if kind == "stereo" else ds.DepthFiles(where)
+    sys.exit(f"dsfec edge: --depth {args.depth!r}; expected network, truth, stereo:DIR or depth:DIR")
+
+
+def gps_track(args, drive_gps=None):
+    from .geo.gps import EgoTrack, GpsFixes, clean_fixes, read_gps
+
+    fixes = read_gps(args.gps) if args.gps else GpsFixes.from_track(drive_gps, source="the synthetic drive's GPS")
+    fixes, report = clean_fixes(fixes, strict=args.strict_gps)
+    if report.num_skipped:
+        print(f"dsfec edge: {report}", file=sys.stderr)
+    return EgoTrack(fixes), report
+
+
+def run_edge_command(args) -> int:
+    from . import zoo
+    from .edge.frames import drive_frames, folder_frames
+    from .edge.pipeline import EdgePipeline
+    from .edge.run import run_edge
+
+    info = {"command": "dsfec " + " ".join(args.argv), "seed": args.seed}
+    try:
+        if args.frames:
+            folder = folder_frames(args.frames, args.fps)
+            camera, baseline, frames, offset, truth_origin = folder.camera, folder.baseline_m, folder.frames, 0.0, None
+            if not args.gps:
+                sys.exit("dsfec edge: --frames needs --gps FILE (CSV time_s,lat,lon,alt on the frames' clock)")
+            track, report = gps_track(args)
+        else:
+            drive, camera, baseline, offset = synthetic_drive(args)
+            frames, truth_origin = (lambda skip: drive_frames(drive, skip)), drive.cfg.origin
+            track, report = gps_track(args, drive.gps)
+            info["drive"] = {"split": "test", "index": args.drive, "seed": args.seed, "frames": args.drive_frames}
+        depth = depth_source(args, args.baseline or baseline or 0.54)
+        detect = zoo.load(args.model, weights=args.weights,
+                          predictor_options={"score_threshold": args.score_threshold})
+    except (FileNotFoundError, ValueError) as err:
+        sys.exit(f"dsfec edge: {err}")
+    info.update(gps=report.to_dict(), depth=args.depth, reference=args.reference, model=args.model)
+    pipeline = EdgePipeline(detect, depth, camera, track, args.device, args.reference, offset)
+    uplink = None
+    if args.server:
+        from .edge.uplink import Uplink
+
+        uplink = Uplink(args.server, Path(args.out) / "queue")
+    summary = run_edge(frames, pipeline, args.out, uplink, info, truth_origin)
+    timing = summary["timing_this_run"]
+    print(f"{summary['frames_placed']} frames ({summary['frames_resumed']} resumed, "
+          f"{summary['frames_skipped_no_gps']} without GPS), {summary['objects']} objects placed; "
+          f"{timing.get('frames_per_s', '-')} frames/s; outputs in {args.out}")
+    if uplink is not None and summary["uplink"]["queued"]:
+        print(f"dsfec edge: {summary['uplink']['queued']} batches still queued in {args.out}/queue "
+              f"(the server did not answer; the next run retries them)", file=sys.stderr)
+    return 0
+
+
+def synthetic_drive(args):
+    from .data.camera.street import StreetConfig, generate_drive
+    from .edge.frames import DRIVE_EPOCH_S
+
+    cfg = StreetConfig()
+    drive = generate_drive(cfg, "test", args.drive, args.seed, args.drive_frames)
+    return drive, cfg.camera_model(), cfg.baseline_m, DRIVE_EPOCH_S

@@ -1,0 +1,66 @@
+"""The SQLite store directly: one transaction per batch (a failure half-way leaves nothing), clear
+errors for a file that is not the service's database, and a light service (no jax import)."""
+
+from __future__ import annotations
+
+import sqlite3
+import subprocess
+import sys
+
+import pytest
+
+from dsfec_jax.service.schema import FrameBatch
+from dsfec_jax.service.store import Conflict, Store
+from service_helpers import make_batch
+
+
+def test_a_batch_that_fails_half_way_leaves_nothing(tmp_path, monkeypatch):
+    store = Store(tmp_path / "map.sqlite")
+    good = FrameBatch.model_validate(make_batch(0, n_objects=3))
+    assert store.put(good) == "stored"
+
+    def half(conn, b, digest, received):  # the batch row goes in, then the objects fail
+        conn.execute("INSERT INTO batches VALUES (?, ?, ?, ?, 0, 0, 0, 0, 0, ?, ?)",
+                     (b.batch_id, b.device, b.frame, b.time, digest, received))
+        raise sqlite3.OperationalError("disk I/O error (simulated)")
+
+    monkeypatch.setattr(Store, "_insert", staticmethod(half))
+    with pytest.raises(sqlite3.OperationalError):
+        store.put(FrameBatch.model_validate(make_batch(1, n_objects=3)))
+    monkeypatch.undo()
+    assert store.counts() == {"batches": 1, "objects": 3, "devices": 1}
+    assert store.put(FrameBatch.model_validate(make_batch(1, n_objects=3))) == "stored"  # and it can be posted again
+    with pytest.raises(Conflict, match="dev-01:000001"):
+        store.put(FrameBatch.model_validate(make_batch(1, n_objects=2)))
+    store.close()
+
+
+def test_reads_come_back_in_the_exchange_format(tmp_path):
+    store = Store(tmp_path / "map.sqlite")
+    posted = make_batch(4, n_objects=2)
+    store.put(FrameBatch.model_validate(posted))
+    batches, truncated = store.objects()
+    assert batches == [posted] and not truncated
+    assert store.tracks() == {"dev-01": [(posted["time"], posted["ego"]["lon"], posted["ego"]["lat"])]}
+    store.close()
+
+
+def test_a_file_that_is_not_the_service_database_is_named(tmp_path):
+    junk = tmp_path / "junk.sqlite"
+    junk.write_bytes(b"this is not a database" * 100)
+    with pytest.raises(ValueError, match="junk.sqlite"):
+        Store(junk)
+    other = tmp_path / "other.sqlite"
+    with sqlite3.connect(other) as conn:
+        conn.execute("PRAGMA user_version = 7")
+    with pytest.raises(ValueError, match="other.sqlite: schema version 7"):
+        Store(other)
+
+
+def test_the_service_starts_light_without_jax():
+    """Nothing the server process or the uplink loads pulls in JAX or the project's heavy rooms."""
+    heavy = ("jax", "flax", "optax", "onnxruntime", "dsfec_jax.models", "dsfec_jax.data", "dsfec_jax.train")
+    code = ("import sys; import dsfec_jax.service.app, dsfec_jax.service.server, dsfec_jax.edge.uplink; "
+            f"print(sorted(m for m in {heavy!r} if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    assert out.stdout.strip() == "[]", out
