@@ -27,7 +27,7 @@ from pathlib import Path
 from .argtypes import positive_int
 
 EDGE_COMMANDS = ("edge", "serve", "depth")
-DEPTH_WEIGHTS = Path(__file__).resolve().parent / "weights" / "monodepth_street.msgpack"
+DEPTH_WEIGHTS = Path(__file__).resolve().parent / "weights" / "depth" / "monodepth_street.msgpack"
 
 
 def add_commands(sub) -> None:
@@ -61,6 +61,7 @@ def add_commands(sub) -> None:
     d.add_argument("--steps", type=positive_int, default=1500)
     d.add_argument("--frames", type=positive_int, default=None, help="train: rendered stereo pairs (2000); eval: test frames (50)")
     d.add_argument("--batch-size", type=positive_int, default=8)
+    d.add_argument("--input", default=None, metavar="HxW", help="train: network input size (default the config's, 160x288)")
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--weights", default=None, help=f"eval: weights (default {DEPTH_WEIGHTS.name}, shipped)")
     d.add_argument("--json", action="store_true")
@@ -90,7 +91,16 @@ def run_depth(args) -> int:
 
         if not args.run_dir:
             sys.exit("dsfec depth train: --run-dir is required")
-        _, info = fit_depth(args.run_dir, MonodepthConfig(), args.frames or 2000, args.steps, args.batch_size, args.seed)
+        size = {}
+        if args.input:
+            try:
+                size = dict(zip(("height", "width"), (int(v) for v in args.input.lower().split("x"))))
+                config = MonodepthConfig(**size)
+            except ValueError as err:
+                sys.exit(f"dsfec depth train: --input {args.input!r}: {err} (expected HxW, multiples of 32)")
+        else:
+            config = MonodepthConfig()
+        _, info = fit_depth(args.run_dir, config, args.frames or 2000, args.steps, args.batch_size, args.seed)
         print(json.dumps({k: v for k, v in info.items() if k != "losses"}, indent=1))
         return 0
     from .data.camera.street import StreetConfig, StreetDataset

@@ -181,3 +181,15 @@ def test_cli_edge_over_a_folder_with_user_depth(drive, frames, tmp_path):
     assert all(b["device"] == "cam-7" for b in done_batches(out))
     with pytest.raises(SystemExit, match="--gps"):
         main(["edge", "--frames", str(d), "--out", str(out)])
+
+
+def test_the_shipped_depth_weights_load_and_record_how_they_were_made():
+    from dsfec_jax.cli_edge import DEPTH_WEIGHTS
+    from dsfec_jax.core import checkpoint
+    from dsfec_jax.predict_depth import load_depth_variables
+
+    manifest = checkpoint.read_manifest(DEPTH_WEIGHTS)
+    assert manifest["train_command"].startswith("dsfec depth train") and manifest["seed"] == 0
+    assert manifest["versions"]["jax"] and checkpoint.problem(DEPTH_WEIGHTS) is None
+    config, variables = load_depth_variables(DEPTH_WEIGHTS)
+    assert config.name == "monodepth_street" and variables["params"]
