@@ -61,7 +61,7 @@ def add_commands(sub) -> None:
     d.add_argument("--steps", type=positive_int, default=1500)
     d.add_argument("--frames", type=positive_int, default=None, help="train: rendered stereo pairs (2000); eval: test frames (50)")
     d.add_argument("--batch-size", type=positive_int, default=8)
-    d.add_argument("--input", default=None, metavar="HxW", help="train: network input size (default the config's, 160x288)")
+    d.add_argument("--input", default=None, metavar="HxW", help="train: network input size (default the config's, 128x224)")
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--weights", default=None, help=f"eval: weights (default {DEPTH_WEIGHTS.name}, shipped)")
     d.add_argument("--json", action="store_true")
