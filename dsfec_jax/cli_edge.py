@@ -91,15 +91,11 @@ def run_depth(args) -> int:
 
         if not args.run_dir:
             sys.exit("dsfec depth train: --run-dir is required")
-        size = {}
-        if args.input:
-            try:
-                size = dict(zip(("height", "width"), (int(v) for v in args.input.lower().split("x"))))
-                config = MonodepthConfig(**size)
-            except ValueError as err:
-                sys.exit(f"dsfec depth train: --input {args.input!r}: {err} (expected HxW, multiples of 32)")
-        else:
-            config = MonodepthConfig()
+        try:
+            size = dict(zip(("height", "width"), map(int, args.input.lower().split("x")))) if args.input else {}
+            config = MonodepthConfig(**size)
+        except ValueError as err:
+            sys.exit(f"dsfec depth train: --input {args.input!r}: {err} (expected HxW, multiples of 32)")
         _, info = fit_depth(args.run_dir, config, args.frames or 2000, args.steps, args.batch_size, args.seed)
         print(json.dumps({k: v for k, v in info.items() if k != "losses"}, indent=1))
         return 0

@@ -54,7 +54,6 @@ class EdgePipeline:
         if not self.covered(frame):
             self.skipped += 1
             return FrameResult(None, None, None, None, {})
-        seconds = {}
         t0 = time.perf_counter()
         dets = self.detect(frame.image)
         t1 = time.perf_counter()
@@ -64,5 +63,4 @@ class EdgePipeline:
         objects, placed = self.placer.place(dets.xyxy, dets.names, dets.scores, depth_map, ego.enu, ego.heading_rad)
         batch = frame_batch(self.device, frame.frame_id, frame.time_s + self.time_offset_s, ego.to_dict(), objects)
         t3 = time.perf_counter()
-        seconds.update(detect=t1 - t0, depth=t2 - t1, place=t3 - t2)
-        return FrameResult(batch, dets, placed, depth_map, seconds)
+        return FrameResult(batch, dets, placed, depth_map, dict(detect=t1 - t0, depth=t2 - t1, place=t3 - t2))
