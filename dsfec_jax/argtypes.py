@@ -1,9 +1,16 @@
-"""argparse types for counts: `--frames 0` is refused with the flag's name instead of quietly
-meaning a default (or producing a score of nothing). Used by every command line in the package."""
+"""argparse helpers used by every command line in the package: types for counts (`--frames 0` is
+refused with the flag's name instead of quietly meaning a default, or producing a score of
+nothing) and the command line as typed, for manifests."""
 
 from __future__ import annotations
 
 import argparse
+import shlex
+
+
+def command_line(args) -> str:
+    """The command as the user typed it (or as a caller passed it to main), for manifests."""
+    return "dsfec " + " ".join(shlex.quote(a) for a in args.argv)
 
 
 def positive_int(text: str) -> int:

@@ -21,11 +21,10 @@ from __future__ import annotations
 import argparse
 import ast
 import json
-import shlex
 import sys
 from pathlib import Path
 
-from .argtypes import non_negative_int, positive_int
+from .argtypes import command_line, non_negative_int, positive_int
 from .cli_edge import EDGE_COMMANDS, add_commands as add_edge_commands
 from .core.defaults import RUN_PILLARS
 
@@ -65,11 +64,6 @@ def common(p: argparse.ArgumentParser, split: str) -> None:
     p.add_argument("--size", type=positive_int, default=None,
                    help="camera models: the long side each image is letterboxed to for evaluation and prediction "
                         "(a multiple of 32; default 416)")
-
-
-def command_line(args) -> str:
-    """The command as the user typed it (or as a caller passed it to main), for manifests."""
-    return "dsfec " + " ".join(shlex.quote(a) for a in args.argv)
 
 
 def parse(argv=None) -> argparse.Namespace:

@@ -24,7 +24,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .argtypes import positive_int
+from .argtypes import command_line, positive_int
 
 EDGE_COMMANDS = ("edge", "serve", "depth")
 DEPTH_WEIGHTS = Path(__file__).resolve().parent / "weights" / "depth" / "monodepth_street.msgpack"
@@ -56,14 +56,17 @@ def add_commands(sub) -> None:
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--port", type=int, default=8000)
     d = sub.add_parser("depth", help="train or evaluate the monodepth network on the street benchmark")
-    d.add_argument("action", choices=("train", "eval"))
-    d.add_argument("--run-dir", default=None)
+    d.add_argument("action", choices=("train", "eval", "ship"))
+    d.add_argument("--run-dir", default=None, help="train: the run directory (resumed if it exists); ship: the finished run")
+    d.add_argument("--out", default=None, help=f"ship: where the weights go (default the shipped {DEPTH_WEIGHTS.name})")
     d.add_argument("--steps", type=positive_int, default=1500)
     d.add_argument("--frames", type=positive_int, default=None, help="train: rendered stereo pairs (2000); eval: test frames (50)")
     d.add_argument("--batch-size", type=positive_int, default=8)
     d.add_argument("--input", default=None, metavar="HxW", help="train: network input size (default the config's, 128x224)")
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--weights", default=None, help=f"eval: weights (default {DEPTH_WEIGHTS.name}, shipped)")
+    d.add_argument("--init", default=None, metavar="PATH",
+                   help="train: start from these weights or checkpoint (same --input): continue or fine-tune")
     d.add_argument("--json", action="store_true")
 
 
@@ -96,8 +99,23 @@ def run_depth(args) -> int:
             config = MonodepthConfig(**size)
         except ValueError as err:
             sys.exit(f"dsfec depth train: --input {args.input!r}: {err} (expected HxW, multiples of 32)")
-        _, info = fit_depth(args.run_dir, config, args.frames or 2000, args.steps, args.batch_size, args.seed)
+        try:
+            _, info = fit_depth(args.run_dir, config, args.frames or 2000, args.steps, args.batch_size, args.seed,
+                                init=args.init, command=command_line(args))
+        except (OSError, ValueError) as err:
+            sys.exit(f"dsfec depth train: {err}")
         print(json.dumps({k: v for k, v in info.items() if k != "losses"}, indent=1))
+        return 0
+    if args.action == "ship":
+        from .predict_depth import ship_depth_weights
+
+        if not args.run_dir:
+            sys.exit("dsfec depth ship: --run-dir is required")
+        try:
+            manifest = ship_depth_weights(args.run_dir, args.out or DEPTH_WEIGHTS, command_line(args))
+        except (OSError, ValueError) as err:
+            sys.exit(f"dsfec depth ship: {err}")
+        print(json.dumps({k: manifest[k] for k in ("step", "train_command", "sha256")}, indent=1))
         return 0
     from .data.camera.street import StreetConfig, StreetDataset
     from .predict_depth import load_depth_predictor
@@ -140,7 +158,7 @@ def run_edge_command(args) -> int:
     from .edge.pipeline import EdgePipeline
     from .edge.run import run_edge
 
-    info = {"command": "dsfec " + " ".join(args.argv), "seed": args.seed}
+    info = {"command": command_line(args), "seed": args.seed}
     try:
         if args.frames:
             folder = folder_frames(args.frames, args.fps)

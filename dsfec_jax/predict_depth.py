@@ -34,6 +34,7 @@ from .core import checkpoint
 from .models.depth import MonodepthConfig, MonodepthNet, init_variables, post_process_disparity
 
 WEIGHTS_FORMAT = "dsfec_jax.monodepth"
+WEIGHTS_NAME = "monodepth.msgpack"  # a finished run's weights: RUN_DIR/monodepth.msgpack
 
 
 def resize_image(image: np.ndarray, height: int, width: int) -> np.ndarray:
@@ -93,6 +94,44 @@ def save_depth_weights(path: str | os.PathLike, config: MonodepthConfig, variabl
     """{'params'} to PATH with the config (and `extra`, e.g. the training step) in its manifest."""
     checkpoint.save(path, {"params": jax.device_get(variables["params"])},
                     {"format": WEIGHTS_FORMAT, "config": config.to_dict(), **(extra or {})})
+
+
+def ship_depth_weights(run_dir: str | os.PathLike, out: str | os.PathLike, ship_command: str) -> dict:
+    """A finished run's weights to OUT with their provenance -> OUT's manifest: step, seed,
+    train_frames, train_command, the runs it continued ('init_chain': each start's weights, step,
+    sha256 and command, read from the run directory that made them) and the versions."""
+    run_dir = Path(run_dir)
+    weights = run_dir / WEIGHTS_NAME
+    if not weights.is_file():
+        raise ValueError(f"{weights}: not found; expected the weights of a finished `dsfec depth train` run")
+    config, variables = load_depth_variables(weights)
+    run = _run_json(run_dir)
+    manifest = checkpoint.read_manifest(weights)
+    extra = {"step": manifest.get("step"), "seed": run.get("seed"), "train_frames": manifest.get("train_frames"),
+             "train_command": run.get("command"), "init_chain": _init_chain(run), "ship_command": ship_command,
+             "source": str(weights), "versions": run.get("versions")}
+    save_depth_weights(out, config, variables, extra)
+    return checkpoint.read_manifest(Path(out))
+
+
+def _run_json(run_dir: Path) -> dict:
+    path = run_dir / "run.json"
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise ValueError(f"{path}: not readable ({err}); expected the run.json of a depth training run") from err
+
+
+def _init_chain(run: dict) -> list[dict]:
+    """The weights a run started from, and theirs, back to a run from scratch."""
+    chain = []
+    while run.get("init") and len(chain) < 16:
+        init = dict(run["init"])
+        parent = Path(init["path"]).parent
+        parent = parent.parent if parent.name == "checkpoints" else parent
+        run = _run_json(parent) if (parent / "run.json").is_file() else {}
+        chain.append({**init, "command": run.get("command"), "seed": run.get("seed")})
+    return chain
 
 
 def _config_for(path: Path, manifest: dict) -> MonodepthConfig:

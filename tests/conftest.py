@@ -1,3 +1,5 @@
+import atexit
+import shutil
 import tempfile
 
 import jax
@@ -9,8 +11,11 @@ from dsfec_jax import zoo
 from dsfec_jax.core.grid import Grid
 
 # Tests rebuild identical networks many times: a per-session persistent compilation cache makes
-# the second compile of the same program a cache hit.
-jax.config.update("jax_compilation_cache_dir", tempfile.mkdtemp(prefix="dsfec-jax-cache-"))
+# the second compile of the same program a cache hit. It is removed when the process exits (each
+# xdist worker has its own), since it grows to ~160 MB a session.
+_CACHE_DIR = tempfile.mkdtemp(prefix="dsfec-jax-cache-")
+atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
+jax.config.update("jax_compilation_cache_dir", _CACHE_DIR)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
 TINY_GRID = Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)  # 32 x 32

@@ -41,12 +41,13 @@ from tqdm import tqdm
 from ..data.camera.street import StreetConfig, StreetDataset
 from ..metrics.depth.dense import MAX_DEPTH, MIN_DEPTH, depth_errors, mean_errors
 from ..models.depth import MonodepthConfig, MonodepthNet, init_variables
-from ..predict_depth import MonodepthPredictor, resize_image, save_depth_weights
+from ..core import checkpoint
+from ..predict_depth import (WEIGHTS_NAME, MonodepthPredictor, load_depth_variables, resize_image,
+                             save_depth_weights)
 from .depth_loss import MonodepthLoss, monodepth_loss
 from .loop import RunSpec, run_record, train
 from .schedules import Schedule
 
-WEIGHTS_NAME = "monodepth.msgpack"
 DECAY_AT = (3 / 5, 4 / 5)   # monodepth_main.py: lr, lr / 2, lr / 4
 DECAY_FACTOR = 0.5
 AUGMENT_TAG = 1             # keeps the augmentation stream apart from the epoch permutations
@@ -191,12 +192,17 @@ def fit_depth(run_dir: str | Path, config: MonodepthConfig, frames: int, steps: 
               street_config: StreetConfig | None = None, progress: bool = True, *, learning_rate: float = 1e-4,
               loss: MonodepthLoss = MonodepthLoss(), augment: DepthAugment | None = DepthAugment(),
               data_seed: int = 0, stop_at: int | None = None, log_every: int = 10,
-              ckpt_every: int = 100) -> tuple[dict, dict]:
+              ckpt_every: int = 100, init: str | Path | None = None,
+              command: str | None = None) -> tuple[dict, dict]:
     """Train (or resume) in run_dir -> ({'params'}, info). info: run_dir, step (reached), steps,
     weights (the final weights file, None before the end: `stop_at`), train_frames, render_s,
-    train_s, losses (metrics.jsonl rows)."""
+    train_s, losses (metrics.jsonl rows). `init`: monodepth weights or a checkpoint of the same
+    config to start from (a longer run continued, or the shipped weights fine-tuned on other pairs);
+    its sha256 goes into run.json, so a resume with other init weights is refused. `command`: the
+command line, for run.json (and the shipped weights' manifest: `dsfec depth ship`)."""
     run_dir = Path(run_dir)
     street_config = street_config or StreetConfig(render_right=True)
+    init_variables, init_record = _init_weights(init, config)
     t0 = time.perf_counter()
     left, right = render_pairs(street_config, frames, config, data_seed, progress=progress)
     render_s = time.perf_counter() - t0
@@ -205,12 +211,13 @@ def fit_depth(run_dir: str | Path, config: MonodepthConfig, frames: int, steps: 
     stream = DepthBatchStream(left, right, batch_size, seed, augment)
     spec = RunSpec(run_dir, schedule, seed, total_steps=steps, stop_at=stop_at, log_every=log_every,
                    ckpt_every=ckpt_every, progress=progress)
-    info = run_record({"data": {"source": "street", "split": "train", "seed": data_seed, "frames": frames,
+    info = run_record({**({"command": command} if command else {}), "data": {"source": "street", "split": "train", "seed": data_seed, "frames": frames,
                                 "street_config": street_config.to_dict()}},
                       config.name, {}, config, schedule, seed, steps, augment, loss=dataclasses.asdict(loss),
-                      optimizer="adam (monodepth: b2 0.999, eps 1e-8, no weight decay, no clipping)")
+                      optimizer="adam (monodepth: b2 0.999, eps 1e-8, no weight decay, no clipping)",
+                      **({"init": init_record} if init_record else {}))
     t1 = time.perf_counter()
-    state, _ = train(trainer, stream, spec, info)
+    state, _ = train(trainer, stream, spec, info, init_variables=init_variables)
     variables = {"params": jax.device_get(state["params"])}
     reached = int(state["step"])
     weights = None
@@ -221,6 +228,17 @@ def fit_depth(run_dir: str | Path, config: MonodepthConfig, frames: int, steps: 
                        "weights": str(weights) if weights else None, "train_frames": frames,
                        "render_s": round(render_s, 1), "train_s": round(time.perf_counter() - t1, 1),
                        "losses": read_losses(run_dir)}
+
+
+def _init_weights(init: str | Path | None, config: MonodepthConfig) -> tuple[dict | None, dict | None]:
+    """(variables, run.json record: path, sha256, step) of the weights a run starts from."""
+    if init is None:
+        return None, None
+    init_config, variables = load_depth_variables(init)
+    if init_config != config:
+        raise ValueError(f"{init}: weights of {init_config}; this run trains {config} (same --input expected)")
+    manifest = checkpoint.read_manifest(Path(init))
+    return variables, {"path": str(init), "sha256": manifest.get("sha256"), "step": manifest.get("step")}
 
 
 def evaluate_dense(predictor: MonodepthPredictor, frames: Sequence, min_depth: float = MIN_DEPTH,

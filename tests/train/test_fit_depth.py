@@ -1,6 +1,7 @@
 """Self-supervised depth training: batches as a pure function of (seed, step), a few steps lower
 the loss, runs repeat exactly, and a resumed run continues as if never stopped."""
 
+import dataclasses
 import json
 
 import jax
@@ -9,7 +10,7 @@ import pytest
 
 from dsfec_jax.data.camera.street import StreetConfig
 from dsfec_jax.models.depth import TINY
-from dsfec_jax.predict_depth import load_depth_predictor
+from dsfec_jax.predict_depth import load_depth_predictor, ship_depth_weights
 from dsfec_jax.train.fit_depth import DepthAugment, DepthBatchStream, fit_depth, read_losses, render_pairs
 
 STREET = StreetConfig(width=64)  # 64 x 36 frames, area-resized to the tiny net's 64 x 32
@@ -50,18 +51,32 @@ def test_flip_mirrors_and_swaps_the_pair(pairs):
 
 
 def test_training_lowers_the_loss_repeats_and_resumes_exactly(tmp_path):
-    _, info = fit_depth(tmp_path / "a", **SETUP)
+    _, info = fit_depth(tmp_path / "a", **SETUP, command="dsfec depth train a")
     losses = [r["loss"] for r in info["losses"]]
     assert len(losses) == 30 and np.mean(losses[-5:]) < 0.9 * np.mean(losses[:5])
     assert info["weights"] and load_depth_predictor(info["weights"]).config == TINY
 
-    _, again = fit_depth(tmp_path / "b", **SETUP)
-    assert [r["loss"] for r in again["losses"]] == losses
-
-    _, part = fit_depth(tmp_path / "c", **SETUP, stop_at=10)
-    assert part["step"] == 10 and part["weights"] is None
-    variables, resumed = fit_depth(tmp_path / "c", **SETUP)
+    _, part = fit_depth(tmp_path / "c", **SETUP, stop_at=10)  # a second run repeats the first's losses
+    assert part["step"] == 10 and part["weights"] is None and [r["loss"] for r in part["losses"]] == losses[:10]
+    variables, resumed = fit_depth(tmp_path / "c", **SETUP)  # and resumed, goes on as if never stopped
     assert [r["loss"] for r in read_losses(tmp_path / "c")] == losses
     assert json.loads((tmp_path / "c" / "run.json").read_text())["resumes"][0]["from_step"] == 10
     final = load_depth_predictor(info["weights"]).variables
     jax.tree.map(np.testing.assert_array_equal, variables, final)
+
+    # --init: a new run starts from trained weights (recorded by hash), of the same config only
+    start, _ = fit_depth(tmp_path / "d", **SETUP, init=info["weights"], stop_at=0, command="dsfec depth train d")
+    jax.tree.map(np.testing.assert_array_equal, start, final)
+    record = json.loads((tmp_path / "d" / "run.json").read_text())["init"]
+    assert record["path"] == info["weights"] and record["step"] == 30 and len(record["sha256"]) == 64
+    with pytest.raises(ValueError, match="same --input"):
+        fit_depth(tmp_path / "e", **{**SETUP, "config": dataclasses.replace(TINY, width=96)}, init=info["weights"])
+
+    # dsfec depth ship: the weights with the commands of the run and of the run it continued
+    fit_depth(tmp_path / "d", **SETUP, init=info["weights"], command="dsfec depth train d")
+    manifest = ship_depth_weights(tmp_path / "d", tmp_path / "shipped.msgpack", "dsfec depth ship d")
+    assert manifest["train_command"] == "dsfec depth train d" and manifest["step"] == 30
+    assert [(r["command"], r["step"]) for r in manifest["init_chain"]] == [("dsfec depth train a", 30)]
+    assert load_depth_predictor(tmp_path / "shipped.msgpack").config == TINY
+    with pytest.raises(ValueError, match="finished"):
+        ship_depth_weights(tmp_path / "e", tmp_path / "none.msgpack", "")
