@@ -4,9 +4,9 @@ candidate boxes the shipped DSFEC-S predictor emits on synthetic frames: the sam
 import numpy as np
 import pytest
 
-from dsfec_jax.boxes import nms
 from dsfec_jax.boxes.nms import batched_rotated_nms, rotated_nms
-from dsfec_jax.boxes.rotated_iou import bev_iou
+from dsfec_jax.boxes.nms_kernel import aligned_ious
+from dsfec_jax.boxes.rotated_iou import bev_iou, bev_iou_aligned, circumradius
 
 PI = np.pi
 
@@ -77,15 +77,25 @@ def test_threshold_equal_to_a_computed_iou_keeps_both():
     assert rotated_nms(boxes, scores, np.nextafter(iou, 0.0)).tolist() == [0]
 
 
-def test_many_rounds_and_the_test_everything_fallback(monkeypatch):
-    """A guess that is always wrong still gives the exact result (the rounds end by testing every
-    listed pair), and so does a perfect one."""
+def test_compiled_pair_iou_is_bitwise_the_clipping_iou():
+    """The compiled pass's IoU is `bev_iou_aligned`'s to the last bit (so every NMS decision is the
+    plain pass's, ties included): random scenes with shared edges, duplicates, flipped and
+    degenerate boxes, and far-away or NaN boxes."""
     rng = np.random.default_rng(3)
-    boxes, scores, labels = _scene(rng, 60)
-    want = reference_nms(boxes, scores, labels, 0.3)
-    for guess in (lambda g, f, s, t: np.ones(len(f), bool), lambda g, f, s, t: np.zeros(len(f), bool)):
-        monkeypatch.setattr(nms, "_likely_above", guess)
-        assert batched_rotated_nms(boxes, scores, labels, 0.3).tolist() == want
+    boxes, _, _ = _scene(rng, 400)
+    boxes[5] = [np.nan, 0, 1, 1, 0]
+    boxes[6] = [1e6, -1e6, 2, 4, 0.1]
+    i, j = rng.integers(0, len(boxes), (2, 20000))
+    a, b = boxes[i], boxes[j]
+    args = [(x, np.cos(x[:, 4]), np.sin(x[:, 4]), circumradius(x)) for x in (a, b)]
+    got = aligned_ious(*args[0], *args[1])
+    want = bev_iou_aligned(a, b)
+    assert ((got > 0) & (got < 1)).sum() > 1000  # many partial overlaps were clipped
+    np.testing.assert_array_equal(got, want)
+    # a perturbation of the arithmetic shows: a corner nudged by one ulp moves some IoUs
+    nudged = a.copy()
+    nudged[:, 0] = np.nextafter(nudged[:, 0], np.inf)
+    assert (aligned_ious(nudged, *args[0][1:], *args[1]) != want).any()
 
 
 def test_a_long_chain_of_overlapping_boxes():
