@@ -8,7 +8,8 @@ import pytest
 from jax import lax
 
 from dsfec_jax.layers import Conv, ConvTranspose, DepthwiseConv
-from dsfec_jax.layers.conv import DIMS, fast_shifted_depthwise, shifted_depthwise, subpixel_conv_transpose
+from dsfec_jax.layers.conv import (DIMS, ROWS_GRAD_MIN_CHANNELS, fast_conv, fast_shifted_depthwise, plain_conv,
+                                   shifted_depthwise, subpixel_conv_transpose)
 from dsfec_jax.models.dsfec.loss import LossConfig, detection_loss
 from conftest import as_float64, random_variables, tiny
 from train.test_train_step import toy_batch
@@ -65,6 +66,23 @@ def test_depthwise_gradient_with_symmetric_pads(shape, stride, kernel):
     assert rel_err(fast_g, plain_g) < RTOL
 
 
+@pytest.mark.parametrize("shape,kernel,cout", [((2, 7, 9, 16), 3, 16), ((3, 6, 5, 17), 3, 20),
+                                              ((1, 8, 8, 16), 5, 18), ((2, 6, 7, 16), 2, 16), ((2, 5, 5, 3), 1, 4)])
+def test_dense_conv_kernel_gradient_equals_autodiff(shape, kernel, cout):
+    """The per-image tap products give XLA's kernel gradient: odd and even kernels ('SAME' pads
+    low and high unequal), odd sizes, batch 1-3."""
+    x = jax.random.normal(jax.random.key(4), shape)
+    w = jax.random.normal(jax.random.key(5), (kernel, kernel, shape[-1], cout)) * 0.2
+    plain_y, plain_g = grads(plain_conv, x, w)
+    fast_y, fast_g = grads(fast_conv, x, w)
+    np.testing.assert_array_equal(fast_y, plain_y)
+    assert rel_err(fast_g[0], plain_g[0]) < RTOL and rel_err(fast_g[1], plain_g[1]) < RTOL
+    # the test can fail: taps read one pixel off give a far-off kernel gradient (a 1x1 kernel's
+    # gradient, a sum over pixels, does not see a shift)
+    shifted = jnp.roll(x, 1, axis=2)
+    assert kernel == 1 or rel_err(jax.grad(lambda w: jnp.sum(jnp.sin(fast_conv(shifted, w))))(w), plain_g[1]) > 1e-2
+
+
 @pytest.mark.parametrize("kernel", [1, 2, 3, 4])
 @pytest.mark.parametrize("stride", [1, 2, 3])
 def test_subpixel_upsampling_equals_conv_transpose(kernel, stride):
@@ -81,10 +99,11 @@ def test_subpixel_upsampling_equals_conv_transpose(kernel, stride):
 @pytest.mark.parametrize("module", [lambda k: Conv(6, 1, 1, use_bias=True, kernels=k),
                                     lambda k: Conv(6, 1, 2, kernels=k),
                                     lambda k: Conv(6, 3, 2, kernels=k),
+                                    lambda k: Conv(ROWS_GRAD_MIN_CHANNELS, 3, 1, kernels=k),
                                     lambda k: DepthwiseConv(3, 2, kernels=k),
                                     lambda k: ConvTranspose(5, 3, 2, kernels=k)])
 def test_each_layer_fast_equals_plain(module):
-    x = jax.random.normal(jax.random.key(0), (2, 7, 6, 4))
+    x = jax.random.normal(jax.random.key(0), (2, 7, 6, ROWS_GRAD_MIN_CHANNELS))
     variables = module("plain").init(jax.random.key(1), x)
 
     def run(kernels):
