@@ -123,14 +123,22 @@ def _run_json(run_dir: Path) -> dict:
 
 
 def _init_chain(run: dict) -> list[dict]:
-    """The weights a run started from, and theirs, back to a run from scratch."""
+    """The weights a run started from, and theirs, back to a run from scratch. Where the start
+    was a shipped file rather than a run directory, its own manifest says how it was trained."""
     chain = []
     while run.get("init") and len(chain) < 16:
         init = dict(run["init"])
         parent = Path(init["path"]).parent
         parent = parent.parent if parent.name == "checkpoints" else parent
-        run = _run_json(parent) if (parent / "run.json").is_file() else {}
-        chain.append({**init, "command": run.get("command"), "seed": run.get("seed")})
+        if (parent / "run.json").is_file():
+            run = _run_json(parent)
+            chain.append({**init, "command": run.get("command"), "seed": run.get("seed")})
+            continue
+        start = Path(init["path"])
+        shipped = checkpoint.read_manifest(start) if checkpoint.manifest_path(start).is_file() else {}
+        chain.append({**init, "command": shipped.get("train_command"), "seed": shipped.get("seed"),
+                      **({"init_chain": shipped["init_chain"]} if shipped.get("init_chain") else {})})
+        break
     return chain
 
 

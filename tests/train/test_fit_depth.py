@@ -78,5 +78,10 @@ def test_training_lowers_the_loss_repeats_and_resumes_exactly(tmp_path):
     assert manifest["train_command"] == "dsfec depth train d" and manifest["step"] == 30
     assert [(r["command"], r["step"]) for r in manifest["init_chain"]] == [("dsfec depth train a", 30)]
     assert load_depth_predictor(tmp_path / "shipped.msgpack").config == TINY
+    # a run continued from shipped weights (no run directory beside them): their manifest's command
+    fit_depth(tmp_path / "f", **SETUP, init=tmp_path / "shipped.msgpack", command="dsfec depth train f")
+    chain = ship_depth_weights(tmp_path / "f", tmp_path / "again.msgpack", "dsfec depth ship f")["init_chain"]
+    assert [(r["command"], r["step"]) for r in chain] == [("dsfec depth train d", 30)]
+    assert [r["command"] for r in chain[0]["init_chain"]] == ["dsfec depth train a"]
     with pytest.raises(ValueError, match="finished"):
         ship_depth_weights(tmp_path / "e", tmp_path / "none.msgpack", "")
