@@ -81,3 +81,30 @@ def test_shipped_weights_detect_nothing_inside_the_grid_on_an_empty_cloud(name):
     out = predictor.predict_tensors({k: v[None] for k, v in tensors.items()})[0]  # what the network answers
     assert np.isfinite(out.scores).all() and (out.scores < 0.2).all()
     assert (edge_distance(out.boxes, grid) < 2.0).all(), np.round(out.boxes.center[:, :2], 1)
+
+
+def test_predictor_runs_on_the_fewest_slots_that_hold_the_frame():
+    """A sparse frame runs on a small slot bucket with the same detections as on every slot, and
+    each bucket compiles once; a frame that fills more slots takes a larger bucket."""
+    from dsfec_jax.data.points.sources import load_frames
+    from dsfec_jax.data.points.pillarize import select_columns
+    from dsfec_jax.predict import SLOT_BUCKET, decoded_network, fewest_slots
+
+    predictor = zoo.load("dsfec_s", max_pillars=8 * SLOT_BUCKET)
+    frame = load_frames("synthetic", "test", 1)[0]
+    sparse = predictor(frame)
+    tensors = pillarize(select_columns(frame, predictor.spec.features), predictor.spec)[0]
+    batch = {k: v[None] for k, v in tensors.items()}
+    used, cut = int(batch["mask"].any(-1).sum()), fewest_slots(batch)["mask"].shape[1]
+    assert used <= cut < batch["mask"].shape[1] and (cut == SLOT_BUCKET or cut < 2 * used)
+    # every slot, no bucketing: the same boxes and scores
+    decoded = jax.device_get(jax.jit(decoded_network(predictor.detector, 100))(predictor.variables, batch))
+    want = predictor._postprocess(decoded[0][0], decoded[1][0], decoded[2][0])
+    np.testing.assert_array_equal(sparse.scores, want.scores)
+    np.testing.assert_array_equal(sparse.boxes.center, want.boxes.center)
+    # more occupied slots than one bucket: the next one, all pillars kept
+    crowded = {**batch, "mask": batch["mask"].copy()}
+    crowded["mask"][0, : SLOT_BUCKET + 1, 0] = True
+    assert fewest_slots(crowded)["mask"].shape[1] == 2 * SLOT_BUCKET
+    crowded["mask"][0, :, 0] = True
+    assert fewest_slots(crowded) is crowded

@@ -20,11 +20,13 @@ JAX_BATCHES = (1, 2, 4, 8)
 
 
 def jax_stages(det, variables, predictor) -> dict:
-    from ...predict import decoder
+    """The JAX predictor's network and decode, apart: the network on the fewest pillar slots that
+    hold the frame (predict.fewest_slots, as the predictor runs it)."""
+    from ...predict import decoder, fewest_slots
 
     net = jax.jit(det.apply)
     dec = jax.jit(decoder(det.config, 100))
-    return {"network": lambda batch: jax.block_until_ready(net(variables, batch)),
+    return {"network": lambda batch: jax.block_until_ready(net(variables, fewest_slots(batch))),
             "decode": lambda maps: jax.device_get(dec(maps))}
 
 
