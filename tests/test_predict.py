@@ -108,3 +108,7 @@ def test_predictor_runs_on_the_fewest_slots_that_hold_the_frame():
     assert fewest_slots(crowded)["mask"].shape[1] == 2 * SLOT_BUCKET
     crowded["mask"][0, :, 0] = True
     assert fewest_slots(crowded) is crowded
+    # slots not packed first (a caller's own tensors): the last occupied slot decides
+    scattered = {**batch, "mask": np.zeros_like(batch["mask"])}
+    scattered["mask"][0, 3 * SLOT_BUCKET - 1, 0] = True
+    assert fewest_slots(scattered)["mask"].shape[1] == 4 * SLOT_BUCKET
