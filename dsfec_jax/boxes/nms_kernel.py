@@ -19,7 +19,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-MAX_VERTICES = 8  # a rectangle clipped by a rectangle has at most 8 vertices; 16 slots leave room
+# Vertex slots of the clipped polygon. Exact arithmetic gives at most 8 (a rectangle clipped by a
+# rectangle), but rounding near shared edges can flip a side test more often; one half-plane step
+# at most doubles the count (each vertex, plus one crossing on its edge), so 4 * 2^4 always fits.
+POLY_SLOTS = 4 * 2 ** 4
 
 
 @numba.njit(cache=True, nogil=True)
@@ -36,7 +39,7 @@ def _corners(cx, cy, w, l, c, s, out):
 @numba.njit(cache=True, nogil=True)
 def pair_intersection(box_a, cos_a, sin_a, box_b, cos_b, sin_b, subject, clip, poly, nxt_poly, side):
     """`rotated_iou._pair_intersection` of one pair (both of positive size): the overlap area.
-    subject, clip: (4, 2) scratch; poly, nxt_poly: (2 * MAX_VERTICES, 2) scratch; side: (2 * MAX_VERTICES,)."""
+    subject, clip: (4, 2) scratch; poly, nxt_poly: (POLY_SLOTS, 2) scratch; side: (POLY_SLOTS,)."""
     _corners(0.0, 0.0, box_a[2], box_a[3], cos_a, sin_a, subject)
     _corners(box_b[0] - box_a[0], box_b[1] - box_a[1], box_b[2], box_b[3], cos_b, sin_b, clip)
     count = 4
@@ -100,8 +103,8 @@ def pair_iou(box_a, cos_a, sin_a, radius_a, box_b, cos_b, sin_b, radius_b, scrat
 
 @numba.njit(cache=True, nogil=True)
 def _scratch():
-    return (np.empty((4, 2)), np.empty((4, 2)), np.empty((2 * MAX_VERTICES, 2)),
-            np.empty((2 * MAX_VERTICES, 2)), np.empty(2 * MAX_VERTICES))
+    return (np.empty((4, 2)), np.empty((4, 2)), np.empty((POLY_SLOTS, 2)), np.empty((POLY_SLOTS, 2)),
+            np.empty(POLY_SLOTS))
 
 
 @numba.njit(cache=True, nogil=True)

@@ -58,7 +58,7 @@ class Conv(nn.Module):
         if k == 1 and fast:
             # a 1x1 conv is a matmul: XLA's CPU dot is ~2x its conv, forward and weight gradient
             y = jnp.dot(x_BxHxWxC[:, :: self.stride, :: self.stride], w[0, 0])
-        elif fast and self.stride == 1 and min(cin, self.features) >= ROWS_GRAD_MIN_CHANNELS:
+        elif fast and self.stride == 1 and min(cin, self.features) >= FAST_CONV_MIN_CHANNELS:
             y = fast_conv(x_BxHxWxC, w)
         else:
             y = lax.conv_general_dilated(
@@ -72,7 +72,7 @@ class Conv(nn.Module):
         return math.prod(out_shape[:-1]) * self.kernel**2 * in_shape[-1] * self.features
 
 
-ROWS_GRAD_MIN_CHANNELS = 16  # below this the per-tap products are too thin to beat XLA's own
+FAST_CONV_MIN_CHANNELS = 16  # below this the per-tap products are too thin to beat XLA's own
 
 
 def plain_conv(x_BxHxWxC, w_KxKxIxO):

@@ -8,7 +8,7 @@ import pytest
 from jax import lax
 
 from dsfec_jax.layers import Conv, ConvTranspose, DepthwiseConv
-from dsfec_jax.layers.conv import (DIMS, ROWS_GRAD_MIN_CHANNELS, fast_conv, fast_shifted_depthwise, plain_conv,
+from dsfec_jax.layers.conv import (DIMS, FAST_CONV_MIN_CHANNELS, fast_conv, fast_shifted_depthwise, plain_conv,
                                    shifted_depthwise, subpixel_conv_transpose)
 from dsfec_jax.models.dsfec.loss import LossConfig, detection_loss
 from conftest import as_float64, random_variables, tiny
@@ -99,11 +99,11 @@ def test_subpixel_upsampling_equals_conv_transpose(kernel, stride):
 @pytest.mark.parametrize("module", [lambda k: Conv(6, 1, 1, use_bias=True, kernels=k),
                                     lambda k: Conv(6, 1, 2, kernels=k),
                                     lambda k: Conv(6, 3, 2, kernels=k),
-                                    lambda k: Conv(ROWS_GRAD_MIN_CHANNELS, 3, 1, kernels=k),
+                                    lambda k: Conv(FAST_CONV_MIN_CHANNELS, 3, 1, kernels=k),
                                     lambda k: DepthwiseConv(3, 2, kernels=k),
                                     lambda k: ConvTranspose(5, 3, 2, kernels=k)])
 def test_each_layer_fast_equals_plain(module):
-    x = jax.random.normal(jax.random.key(0), (2, 7, 6, ROWS_GRAD_MIN_CHANNELS))
+    x = jax.random.normal(jax.random.key(0), (2, 7, 6, FAST_CONV_MIN_CHANNELS))
     variables = module("plain").init(jax.random.key(1), x)
 
     def run(kernels):
