@@ -20,7 +20,7 @@ class ConvBNAct(nn.Module):
     @nn.compact
     def __call__(self, x, train: bool = False):
         x = Conv(self.features, self.kernel, self.stride, kernels=self.kernels, name="conv")(x)
-        return activation(self.act)(batch_norm(train, "bn")(x))
+        return activation(self.act)(batch_norm(train, "bn", self.kernels)(x))
 
 
 class DSConv(nn.Module):
@@ -36,9 +36,9 @@ class DSConv(nn.Module):
     def __call__(self, x, train: bool = False):
         act = activation(self.act)
         x = DepthwiseConv(3, self.stride, self.depthwise_impl, self.kernels, name="dw")(x)
-        x = act(batch_norm(train, "dw_bn")(x))
+        x = act(batch_norm(train, "dw_bn", self.kernels)(x))
         x = Conv(self.features, 1, kernels=self.kernels, name="pw")(x)
-        return act(batch_norm(train, "pw_bn")(x))
+        return act(batch_norm(train, "pw_bn", self.kernels)(x))
 
 
 class ResidualBottleneck(nn.Module):
@@ -54,11 +54,11 @@ class ResidualBottleneck(nn.Module):
     def __call__(self, x, train: bool = False):
         act = activation(self.act)
         planes, k = self.features // self.expansion, self.kernels
-        y = act(batch_norm(train, "bn1")(Conv(planes, 1, kernels=k, name="conv1")(x)))
-        y = act(batch_norm(train, "bn2")(Conv(planes, 3, self.stride, kernels=k, name="conv2")(y)))
-        y = batch_norm(train, "bn3")(Conv(self.features, 1, kernels=k, name="conv3")(y))
+        y = act(batch_norm(train, "bn1", k)(Conv(planes, 1, kernels=k, name="conv1")(x)))
+        y = act(batch_norm(train, "bn2", k)(Conv(planes, 3, self.stride, kernels=k, name="conv2")(y)))
+        y = batch_norm(train, "bn3", k)(Conv(self.features, 1, kernels=k, name="conv3")(y))
         shortcut = x
         if self.stride != 1 or x.shape[-1] != self.features:
             shortcut = Conv(self.features, 1, self.stride, kernels=k, name="proj")(x)
-            shortcut = batch_norm(train, "proj_bn")(shortcut)
+            shortcut = batch_norm(train, "proj_bn", k)(shortcut)
         return act(y + shortcut)

@@ -16,21 +16,12 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from .batch_norm import BatchNorm
+from .kernels import KERNELS, Kernels, check_kernels  # noqa: F401  (re-exported)
+
 DIMS = ("NHWC", "HWIO", "NHWC")
 DepthwiseImpl = Literal["shifted", "grouped"]
-# "fast": formulations chosen for XLA's CPU training step (1x1 convs as matmuls, a hand-written
-# depthwise gradient, sub-pixel upsampling); "plain": the textbook ones (lax.conv, autodiff,
-# lax.conv_transpose). Same parameters and the same values: tests hold the gradients equal, and
-# `dsfec bench --train --compare kernels=plain` measures the difference.
-Kernels = Literal["fast", "plain"]
-KERNELS = ("fast", "plain")
 kernel_init = nn.initializers.variance_scaling(2.0, "fan_in", "truncated_normal")
-
-
-def _check_kernels(kernels: str) -> str:
-    if kernels not in KERNELS:
-        raise ValueError(f"kernels={kernels!r}; valid: {', '.join(map(repr, KERNELS))}")
-    return kernels
 
 
 def same_pads(size: int, kernel: int, stride: int) -> tuple[int, int]:
@@ -54,7 +45,7 @@ class Conv(nn.Module):
     def __call__(self, x_BxHxWxC):
         k, cin = self.kernel, x_BxHxWxC.shape[-1]
         w = self.param("kernel", kernel_init, (k, k, cin, self.features))
-        fast = _check_kernels(self.kernels) == "fast"
+        fast = check_kernels(self.kernels) == "fast"
         if k == 1 and fast:
             # a 1x1 conv is a matmul: XLA's CPU dot is ~2x its conv, forward and weight gradient
             y = jnp.dot(x_BxHxWxC[:, :: self.stride, :: self.stride], w[0, 0])
@@ -148,7 +139,7 @@ class DepthwiseConv(nn.Module):
                 dimension_numbers=DIMS, feature_group_count=c,
             )
         if self.impl == "shifted":
-            fast = _check_kernels(self.kernels) == "fast"
+            fast = check_kernels(self.kernels) == "fast"
             return (fast_shifted_depthwise if fast else shifted_depthwise)(x_BxHxWxC, w[:, :, 0, :], self.stride)
         raise ValueError(f"DepthwiseConv.impl={self.impl!r}; valid: 'shifted', 'grouped'")
 
@@ -259,7 +250,7 @@ class ConvTranspose(nn.Module):
     def __call__(self, x_BxHxWxC):
         cin = x_BxHxWxC.shape[-1]
         w = self.param("kernel", kernel_init, (self.kernel, self.kernel, cin, self.features))
-        if _check_kernels(self.kernels) == "fast":
+        if check_kernels(self.kernels) == "fast":
             y = subpixel_conv_transpose(x_BxHxWxC, w, self.stride)
         else:
             y = lax.conv_transpose(x_BxHxWxC, w, (self.stride, self.stride), "SAME", dimension_numbers=DIMS)
@@ -335,6 +326,5 @@ BN_MOMENTUM = 0.99
 BN_EPS = 1e-3
 
 
-def batch_norm(train: bool, name: str | None = None) -> nn.BatchNorm:
-    return nn.BatchNorm(use_running_average=not train, momentum=BN_MOMENTUM, epsilon=BN_EPS, name=name)
-
+def batch_norm(train: bool, name: str | None = None, kernels: Kernels = "fast") -> BatchNorm:
+    return BatchNorm(use_running_average=not train, momentum=BN_MOMENTUM, epsilon=BN_EPS, kernels=kernels, name=name)

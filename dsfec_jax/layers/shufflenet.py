@@ -91,11 +91,11 @@ class ShuffleUnit(nn.Module):
 
     def _pointwise(self, x, features: int, name: str, train: bool):
         x = Conv(features, 1, kernels=self.kernels, name=name)(x)
-        return activation(self.act)(batch_norm(train, f"{name}_bn")(x))
+        return activation(self.act)(batch_norm(train, f"{name}_bn", self.kernels)(x))
 
     def _depthwise(self, x, name: str, train: bool):
         x = DepthwiseConv(self.kernel, self.stride, self.depthwise_impl, self.kernels, name=name)(x)
-        return batch_norm(train, f"{name}_bn")(x)
+        return batch_norm(train, f"{name}_bn", self.kernels)(x)
 
     def _branch(self, x, features: int, name: str, train: bool):
         """1x1 + BN + act, depthwise kxk (the unit's stride) + BN, 1x1 + BN + act."""

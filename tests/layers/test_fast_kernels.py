@@ -171,3 +171,40 @@ def test_radarnext_training_gradients_equal(name, float64):
     plain_g, fast_g = output_grads(plain), output_grads(fast)
     assert rel_err(fast_g, plain_g) < RTOL
     assert_leaves_close(fast_g, plain_g)
+
+
+@pytest.mark.parametrize("kernels", ["fast", "plain"])
+@pytest.mark.parametrize("shape,masked", [((3, 5, 7, 6), False), ((2, 40, 5), False), ((2, 40, 5), True)])
+def test_batch_norm_equals_flax_in_values_statistics_and_gradients(kernels, shape, masked):
+    """layers.batch_norm.BatchNorm holds flax's BatchNorm variables and computes its values:
+    train outputs, the running-average update and the gradients (the fast one by its closed form)."""
+    import flax.linen as nn
+
+    from dsfec_jax.layers.batch_norm import BatchNorm
+
+    x = jax.random.normal(jax.random.key(0), shape) * 3.0 + 1.5
+    mask = (jax.random.uniform(jax.random.key(1), shape[:-1] + (1,)) > 0.3) if masked else None
+    ours, flax_bn = BatchNorm(False, 0.9, 1e-3, kernels), nn.BatchNorm(use_running_average=False, momentum=0.9, epsilon=1e-3)
+    variables = flax_bn.init(jax.random.key(2), x, mask=mask)
+    assert jax.tree.structure(ours.init(jax.random.key(2), x, mask=mask)) == jax.tree.structure(variables)
+    c = shape[-1]
+    params = {"scale": jnp.linspace(0.5, 2.0, c), "bias": jnp.linspace(-1.0, 1.0, c)}
+    stats = {"mean": jnp.linspace(-0.2, 0.3, c), "var": jnp.linspace(0.5, 1.5, c)}
+
+    def run(module):
+        def loss(p, x):
+            y, updated = module.apply({"params": p, "batch_stats": stats}, x, mask=mask, mutable=["batch_stats"])
+            weights = jnp.arange(y.size, dtype=y.dtype).reshape(y.shape) / y.size  # a different gradient per element
+            return jnp.sum(jnp.sin(y) * weights), updated
+        return jax.value_and_grad(loss, (0, 1), has_aux=True)(params, x)
+
+    (ours_loss, ours_stats), ours_g = run(ours)
+    (flax_loss, flax_stats), flax_g = run(flax_bn)
+    assert float(ours_loss) == pytest.approx(float(flax_loss), rel=1e-6)
+    for key in ("mean", "var"):
+        np.testing.assert_allclose(ours_stats["batch_stats"][key], flax_stats["batch_stats"][key], rtol=1e-6)
+    assert_leaves_close(ours_g, flax_g)
+    # evaluation uses the running averages, in flax's order of operations: the same bits
+    evaluated = [m.clone(use_running_average=True).apply({"params": params, "batch_stats": stats}, x)
+                 for m in (ours, nn.BatchNorm(momentum=0.9, epsilon=1e-3))]
+    np.testing.assert_array_equal(evaluated[0], evaluated[1])

@@ -34,7 +34,7 @@ class CenterHead(nn.Module):
     def __call__(self, x, train: bool = False) -> dict:
         x = conv_bias_bn_relu(x, self.width, train, "shared")
         x = ConvTranspose(self.width, 2, 2, use_bias=False, kernels=self.kernels, name="deblock")(x)
-        x = nn.relu(batch_norm(train, "deblock_bn")(x))
+        x = nn.relu(batch_norm(train, "deblock_bn", self.kernels)(x))
         outputs = list(BOX_OUTPUTS) + [("hm", self.num_classes)] + ([("corner_hm", 1)] if self.corner_head else [])
         maps = {}
         for name, n in outputs:

@@ -44,7 +44,7 @@ class SECONDFPN(nn.Module):
             ConvTranspose(self.channels, 1, 1, use_bias=False, kernels=k, name="up1")(x1),
             ConvTranspose(self.channels, 2, 2, use_bias=False, kernels=k, name="up2")(x0),
         ]
-        return jnp.concatenate([nn.relu(batch_norm(train, f"bn{i}")(u)) for i, u in enumerate(ups)], -1)
+        return jnp.concatenate([nn.relu(batch_norm(train, f"bn{i}", k)(u)) for i, u in enumerate(ups)], -1)
 
 
 class PANeck(nn.Module):
