@@ -10,7 +10,8 @@ variance separately and leaves XLA's CPU backend several full passes over the ac
 few gradient accumulations (`add_any`) besides; on a DSFEC-L training step, BN and the
 activations after it were about a quarter of the op time. The closed form needs two passes: one
 reduction (sum dy, sum dy * x_hat) and one elementwise pass for dx, into which XLA fuses the
-activation's backward that produces dy.
+activation's backward that produces dy. Measured: 1.02-1.03x on the DSFEC-S and -L train steps
+(XLA already fused much of autodiff's form).
 """
 
 from __future__ import annotations
