@@ -18,21 +18,6 @@ atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
 jax.config.update("jax_compilation_cache_dir", _CACHE_DIR)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
-def pytest_configure(config):
-    config.addinivalue_line("markers", "long(seconds): one of the suite's longest tests, and its time on the 2-core CI box")
-
-
-def pytest_collection_modifyitems(config, items):
-    """The longest tests first, longest of all first; the rest keep their order. pytest-xdist's
-    two workers take tests in this order, so no long test starts late and keeps one worker busy
-    after the other has finished (the suite's wall time is the busier worker's)."""
-    def seconds(item) -> float:
-        mark = item.get_closest_marker("long")
-        return float(mark.args[0]) if mark else 0.0
-
-    items.sort(key=lambda item: -seconds(item))  # stable
-
-
 TINY_GRID = Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)  # 32 x 32
 
 

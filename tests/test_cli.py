@@ -14,7 +14,6 @@ def tiny_model(monkeypatch):
     return "tiny_s"
 
 
-@pytest.mark.long(43)
 def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
     run = tmp_path / "run"
     assert cli.main(["train", "--model", tiny_model, "--steps", "3", "--batch-size", "2", "--frames", "4",

@@ -31,16 +31,17 @@ def _reduction_axes(x) -> tuple[int, ...]:
     return tuple(range(x.ndim - 1))
 
 
-def batch_stats(x):
-    """(mean, variance) over every axis but the last, as flax computes them (fast variance)."""
+def batch_stats(x, where=None):
+    """(mean, variance) over every axis but the last (the positions `where` is true, if given), as
+    flax computes them (fast variance)."""
     axes = _reduction_axes(x)
-    mean = x.mean(axes)
-    return mean, jnp.maximum(0.0, (x * x).mean(axes) - mean * mean)
+    mean = x.mean(axes, where=where)
+    return mean, jnp.maximum(0.0, (x * x).mean(axes, where=where) - mean * mean)
 
 
-def plain_batch_norm(x, scale, bias, epsilon: float):
+def plain_batch_norm(x, scale, bias, epsilon: float, where=None):
     """Training-mode BN by autodiff's rules: (y, batch mean, batch variance)."""
-    mean, var = batch_stats(x)
+    mean, var = batch_stats(x, where)
     return normalize(x, mean, var, scale, bias, epsilon), mean, var
 
 
@@ -95,19 +96,12 @@ class BatchNorm(nn.Module):
         bias = self.param("bias", nn.initializers.zeros, features, jnp.float32)
         if self.use_running_average:
             return normalize(x, ra_mean.value, ra_var.value, scale, bias, self.epsilon)
-        if mask is not None:
-            y, mean, var = self._masked(x, mask, scale, bias)
-        elif check_kernels(self.kernels) == "fast":
+        if mask is None and check_kernels(self.kernels) == "fast":
             y, mean, var = fast_batch_norm(x, scale, bias, self.epsilon)
         else:
-            y, mean, var = plain_batch_norm(x, scale, bias, self.epsilon)
+            where = None if mask is None else jnp.asarray(mask, bool)
+            y, mean, var = plain_batch_norm(x, scale, bias, self.epsilon, where)
         if not self.is_initializing():
             ra_mean.value = self.momentum * ra_mean.value + (1 - self.momentum) * mean
             ra_var.value = self.momentum * ra_var.value + (1 - self.momentum) * var
         return y
-
-    def _masked(self, x, mask, scale, bias):
-        axes, where = _reduction_axes(x), jnp.asarray(mask, bool)
-        mean = x.mean(axes, where=where)
-        var = jnp.maximum(0.0, (x * x).mean(axes, where=where) - mean * mean)
-        return normalize(x, mean, var, scale, bias, self.epsilon), mean, var

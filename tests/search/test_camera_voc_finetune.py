@@ -32,7 +32,6 @@ def test_split_is_by_sorted_id_and_renaming_drops_other_classes():
         exp.split_by_id([image("a", []), image("b", []), image("c", [])], 3)
 
 
-@pytest.mark.long(66)
 def test_three_rows_on_the_held_out_real_images(tmp_path):
     det = zoo.create("shuffle_yolov3", **STREET)
     variables = det.init(jax.random.key(0))

@@ -13,7 +13,6 @@ from search.nas.space import from_key, key
 from search.nas.spaces import get_space
 
 
-@pytest.mark.long(250)
 def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
     from dsfec_jax.models.yolo_rd.variants import searched_variants
     import search.nas.register
@@ -54,7 +53,6 @@ def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
     assert cfg.name == "smoke_search" and cfg.backbone_width_ratios == tuple(best["choices"][f"backbone{b}"] for b in range(1, 6))
 
 
-@pytest.mark.long(131)
 def test_dsfec_space_searches_retrains_and_registers(tmp_path, monkeypatch):
     """The DSFEC width x depth x stem supernet through the same command: searched under a latency
     limit (a table built here from two measured subnets), retrained stand-alone from the base's

@@ -126,7 +126,6 @@ def finished_random_supernet(space, run_dir, steps: int) -> None:
 
 
 @two_cpus
-@pytest.mark.long(55)
 def test_two_actors_score_a_batch_as_the_in_process_scorer_does(tmp_path, local_ray_env):
     """Smoke profile of the yolov8n_adapter space (8 val maps, BN recalibrated on 2 batches of 4
     maps): 2 actors each load the finished supernet from RUN_DIR/supernet and build the engine's

@@ -67,7 +67,6 @@ def _same(a, b) -> bool:
     return all(np.array_equal(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
 
 
-@pytest.mark.long(66)
 def test_resumed_sandwich_run_equals_an_uninterrupted_one_and_updates_once_a_cycle(setting, tmp_path):
     from search.nas.spos_points import base_init, supernet_detectors
     from dsfec_jax.train.step import init_state

@@ -61,7 +61,6 @@ def test_activation_candidates_one_component_at_a_time():
     assert {"act_car_head": "relu", "act_truck_head": "relu"} in [c["overrides"] for c in cands]
 
 
-@pytest.mark.long(43)
 def test_real_sweep_trains_measures_and_reports(tiny_search, tmp_path, capsys):
     out = tmp_path / "run"
     assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "train",
@@ -182,7 +181,6 @@ if sys.argv and sys.argv[0].endswith("default_worker.py"):
 """
 
 
-@pytest.mark.long(89)
 def test_ray_backend_runs_a_two_trial_sweep(tmp_path, monkeypatch):
     import os
 

@@ -30,7 +30,6 @@ SIZES = MultiScale((64, 96), every=1)
 STEPS, SEED = 3, 2  # seed 2 draws sizes 96, 64, 64 for steps 0-2: two sizes, one of them twice
 
 
-@pytest.mark.long(51)
 def test_one_trace_per_input_size_and_a_resumed_run_is_the_straight_one(tmp_path, monkeypatch):
     det = zoo.create("shuffle_yolov3", **TINY)
     targets = functools.partial(pad_batch, class_names=det.config.classes, max_boxes=16)

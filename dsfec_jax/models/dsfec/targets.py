@@ -71,9 +71,10 @@ def cell_owners(flat_xy, b: Boxes, grid, stride: int, shape: tuple[int, int]) ->
     # a cell inside several boxes belongs to the nearest centre (the lower index on a tie)
     dx, dy = flat_xy[pair_cell, 0] - b.center[pair_box, 0], flat_xy[pair_cell, 1] - b.center[pair_box, 1]
     order = np.lexsort((pair_box, np.sqrt(dx * dx + dy * dy), pair_cell))
+    pair_cell, pair_box = pair_cell[order], pair_box[order]
     first = np.ones(len(order), bool)
-    first[1:] = pair_cell[order][1:] != pair_cell[order][:-1]
-    return pair_cell[order][first], pair_box[order][first]
+    first[1:] = pair_cell[1:] != pair_cell[:-1]
+    return pair_cell[first], pair_box[first]
 
 
 def detector_targets(boxes: Boxes, head_classes: dict[str, tuple[str, ...]], grid, stride: int) -> dict:
