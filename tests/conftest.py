@@ -1,4 +1,5 @@
 import atexit
+import os
 import shutil
 import tempfile
 
@@ -10,13 +11,29 @@ import pytest
 from dsfec_jax import zoo
 from dsfec_jax.core.grid import Grid
 
-# Tests rebuild identical networks many times: a per-session persistent compilation cache makes
-# the second compile of the same program a cache hit. It is removed when the process exits (each
-# xdist worker has its own), since it grows to ~160 MB a session.
-_CACHE_DIR = tempfile.mkdtemp(prefix="dsfec-jax-cache-")
-atexit.register(shutil.rmtree, _CACHE_DIR, ignore_errors=True)
+# Tests rebuild identical networks many times: a persistent compilation cache makes the second
+# compile of the same program a cache hit. The first process to load this file (pytest itself,
+# or xdist's controller, which loads it before it starts its workers) makes the folder, names it
+# in the environment the workers inherit, and removes it at exit; so both workers of a run share
+# one cache, and a program one of them compiled is a hit on the other. It grows to a few hundred
+# MB a session.
+_CACHE_ENV = "DSFEC_TEST_COMPILATION_CACHE"
+if _CACHE_ENV not in os.environ:
+    os.environ[_CACHE_ENV] = tempfile.mkdtemp(prefix="dsfec-jax-cache-")
+    atexit.register(shutil.rmtree, os.environ[_CACHE_ENV], ignore_errors=True)
+_CACHE_DIR = os.environ[_CACHE_ENV]
 jax.config.update("jax_compilation_cache_dir", _CACHE_DIR)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+# a size limit turns on the cache's file lock (filelock), so one worker never reads an entry the
+# other is still writing
+jax.config.update("jax_compilation_cache_max_size", 8 << 30)
+
+# The suite's programs run on toy shapes, so compiling them costs far more than running them:
+# LLVM's optimisation of the generated loops is skipped (the XLA graph passes all still run, and
+# dots and convolutions call the same library kernels). Measured on `.ci/run`: see the README.
+# Set before the first computation, when XLA reads its flags.
+if "--xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
 
 TINY_GRID = Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)  # 32 x 32
 

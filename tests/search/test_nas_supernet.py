@@ -99,3 +99,23 @@ def test_mask_table_and_spos_draws(supernet):
     assert batch["inputs"]["heat"][0] == 3 and batch["window"] == 0 and batch.keys() == {"inputs", "targets", "window"}
     assert all(np.array_equal(batch["inputs"]["masks"][k], v) for k, v in subnet_inputs(a.genes(3))["masks"].items())
     assert a.batch_size == 2
+
+
+def test_param_shapes_are_cached_per_config_and_equal_a_fresh_trace(monkeypatch):
+    """The mask table's shape look-ups trace each config once: a second network of the same config
+    is a cache hit (no init traced), another config or float64 mode is traced anew."""
+    space = get_space("yolov8n_adapter")
+    traced = []
+    real = elastic._traced_shapes
+    monkeypatch.setattr(elastic, "_traced_shapes", lambda det: traced.append(det.config) or real(det))
+    monkeypatch.setattr(elastic, "_PARAM_SHAPES", {})
+    small = space.overrides(space.smallest())
+    first = elastic.param_shapes(zoo.create(space.base, **small))
+    again = elastic.param_shapes(zoo.create(space.base, **small))
+    assert len(traced) == 1 and again is first
+    fresh = jax.eval_shape(lambda: zoo.create(space.base, **small).init(jax.random.key(0)))["params"]
+    assert jax.tree.structure(first) == jax.tree.structure(fresh)
+    assert jax.tree.leaves(jax.tree.map(lambda a, b: a.shape == b.shape and a.dtype == b.dtype, first, fresh)) == \
+        [True] * len(jax.tree.leaves(fresh))
+    elastic.param_shapes(zoo.create(space.base, **space.overrides(space.largest())))
+    assert len(traced) == 2  # another config: traced
