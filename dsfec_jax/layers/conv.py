@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from . import depthwise_grad_cpu
 from .batch_norm import BatchNorm
 from .kernels import KERNELS, Kernels, check_kernels  # noqa: F401  (re-exported)
 
@@ -203,10 +204,7 @@ def _depthwise_input_grad(g, w_KxKxC, x_shape, stride: int, pads):
     """d x: output o*s + t - pad_low reads input row m, so m gets g[o] * w[t]: a stride-1 conv of
     g dilated by s with the flipped kernel, padded to cover every input row."""
     k = w_KxKxC.shape[0]
-    if pads is None:
-        (low_h, _), (low_w, _) = same_pads(x_shape[1], k, stride), same_pads(x_shape[2], k, stride)
-    else:
-        low_h = low_w = pads[0]
+    low_h, low_w = _low_pads(x_shape, k, stride, pads)
     ho, wo = g.shape[1], g.shape[2]
     pad_h = (k - 1 - low_h, x_shape[1] - 1 + low_h - (ho - 1) * stride, stride - 1)
     pad_w = (k - 1 - low_w, x_shape[2] - 1 + low_w - (wo - 1) * stride, stride - 1)
@@ -214,8 +212,26 @@ def _depthwise_input_grad(g, w_KxKxC, x_shape, stride: int, pads):
     return shifted_depthwise(gd, w_KxKxC[::-1, ::-1], 1, pads=(0, 0))
 
 
+def _low_pads(x_shape, k: int, stride: int, pads) -> tuple[int, int]:
+    """The padding before the first row and column (TF 'SAME' unless `pads` is given)."""
+    if pads is None:
+        return same_pads(x_shape[1], k, stride)[0], same_pads(x_shape[2], k, stride)[0]
+    return pads[0], pads[0]
+
+
 def _depthwise_kernel_grad(x, g, k: int, stride: int, pads):
-    """d w[i, j] = sum over images and pixels of tap (i, j) times g."""
+    """d w[i, j] = sum over images and pixels of tap (i, j) times g: on the CPU a compiled loop that
+    reads x and g in place (depthwise_grad_cpu.py), elsewhere XLA's sums over tap views."""
+    if not depthwise_grad_cpu.supported(x.dtype):
+        return _xla_depthwise_kernel_grad(x, g, k, stride, pads)
+    low_h, low_w = _low_pads(x.shape, k, stride, pads)
+    return lax.platform_dependent(
+        x, g, cpu=lambda x, g: depthwise_grad_cpu.kernel_grad(x, g, k, stride, low_h, low_w),
+        default=lambda x, g: _xla_depthwise_kernel_grad(x, g, k, stride, pads))
+
+
+def _xla_depthwise_kernel_grad(x, g, k: int, stride: int, pads):
+    """`_depthwise_kernel_grad` in XLA: each tap's view (a copy) times g, summed a few images at a time."""
     xp, ho, wo = _padded(x, k, stride, pads)
 
     def chunk(pair):

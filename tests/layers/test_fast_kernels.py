@@ -66,6 +66,35 @@ def test_depthwise_gradient_with_symmetric_pads(shape, stride, kernel):
     assert rel_err(fast_g, plain_g) < RTOL
 
 
+@pytest.mark.parametrize("dtype,tol", [(jnp.float32, 1e-5), (jnp.float64, 1e-12)])
+@pytest.mark.parametrize("shape,stride,kernel,pads", [((2, 7, 9, 3), 1, 3, None), ((3, 8, 8, 4), 2, 3, None),
+                                                      ((1, 9, 6, 5), 3, 3, None), ((2, 9, 9, 2), 2, 5, (2, 2)),
+                                                      ((2, 6, 7, 3), 1, 3, (1, 1))])
+def test_depthwise_kernel_gradient_loop_runs_in_the_program_and_equals_xlas(shape, stride, kernel, pads, dtype, tol,
+                                                                          float64):
+    """On the CPU the kernel gradient is the compiled loop (an XLA custom call in the program), with
+    XLA's own formulation's values, bit for bit the same on a second call."""
+    from dsfec_jax.layers import conv
+
+    x = jax.random.normal(jax.random.key(4), shape, dtype)
+    _, ho, wo = conv._padded(x, kernel, stride, pads)  # the output size
+    g = jax.random.normal(jax.random.key(5), (shape[0], ho, wo, shape[-1]), dtype)
+    loop = jax.jit(lambda x, g: conv._depthwise_kernel_grad(x, g, kernel, stride, pads))
+    assert "dsfec_depthwise_kernel_grad" in loop.lower(x, g).as_text()
+    got, reference = loop(x, g), conv._xla_depthwise_kernel_grad(x, g, kernel, stride, pads)
+    assert got.shape == (kernel, kernel, shape[-1]) and got.dtype == dtype
+    assert float(jnp.abs(got - reference).max() / jnp.abs(reference).max()) < tol
+    np.testing.assert_array_equal(loop(x, g), got)
+
+
+def test_depthwise_kernel_gradient_of_other_dtypes_stays_in_xla():
+    from dsfec_jax.layers import conv
+
+    x = jnp.ones((1, 5, 5, 2), jnp.bfloat16)
+    lowered = jax.jit(lambda x: conv._depthwise_kernel_grad(x, x, 3, 1, None)).lower(x).as_text()
+    assert "dsfec_depthwise_kernel_grad" not in lowered
+
+
 @pytest.mark.parametrize("shape,kernel,cout", [((2, 7, 9, 16), 3, 16), ((3, 6, 5, 17), 3, 20),
                                               ((1, 8, 8, 16), 5, 18), ((2, 6, 7, 16), 2, 16), ((2, 5, 5, 3), 1, 4)])
 def test_dense_conv_kernel_gradient_equals_autodiff(shape, kernel, cout):
