@@ -271,7 +271,7 @@ def time_interleaved(workloads: list[Workload], references: dict[str, Callable[[
 def time_alone(references: dict[str, Callable[[], None]], settings: Settings) -> dict:
     """{reference: [ms]}: each reference called back to back, `warmup` calls then `repeats` timed.
     The machine's peak is this: the same matmul called between the models' programs runs slower
-    (measured: XLA's 2048^2 matmul 38-41 ms alone, 54-59 ms right after a DSFEC-S train step)."""
+    (measured: XLA's 2048^2 matmul 38-41 ms alone, 55-59 ms right after a DSFEC-S train step)."""
     samples = {}
     for reference, call in references.items():
         for _ in range(settings.warmup):
