@@ -74,10 +74,7 @@ def kernel_grad_loop(x, g, k, stride, pad_h, pad_w, out):
                         for c in range(channels):
                             row[i, j, c] += x[b, r, q, c] * g[b, h, w, c]
             total += row
-    for i in range(k):
-        for j in range(k):
-            for c in range(channels):
-                out[i, j, c] = total[i, j, c]
+    out[:] = total
 
 
 def _handler(dtype):
@@ -117,20 +114,17 @@ def _handler(dtype):
     return handler
 
 
-_HANDLERS: dict = {}  # dtype -> (target name, cfunc): the cfuncs must outlive every call
-
-
 @functools.cache
-def _target(dtype: np.dtype) -> str:
-    """Compile and register the handler for `dtype` once per process -> its target name."""
+def _registered(dtype: np.dtype) -> tuple[str, object]:
+    """Compile and register the handler for `dtype` once per process -> (its target name, the
+    cfunc; kept here because XLA calls its address for the life of the process)."""
     handler = _handler(dtype.type)
     name = f"dsfec_depthwise_kernel_grad_{dtype.name}"
     capsule_new = ctypes.pythonapi.PyCapsule_New
     capsule_new.restype = ctypes.py_object
     capsule_new.argtypes = (ctypes.c_void_p, ctypes.c_char_p, ctypes.c_void_p)
     jax.ffi.register_ffi_target(name, capsule_new(handler.address, b"xla._CUSTOM_CALL_TARGET", None), platform="cpu")
-    _HANDLERS[dtype] = (name, handler)
-    return name
+    return name, handler
 
 
 def supported(dtype) -> bool:
@@ -140,7 +134,7 @@ def supported(dtype) -> bool:
 def kernel_grad(x_BxHxWxC, g_BxHoxWoxC, k: int, stride: int, pad_h: int, pad_w: int):
     """d w (k, k, C) of a depthwise conv through the compiled loop (CPU only; `supported` dtypes)."""
     dtype = np.dtype(x_BxHxWxC.dtype)
-    call = jax.ffi.ffi_call(_target(dtype), jax.ShapeDtypeStruct((k, k, x_BxHxWxC.shape[-1]), dtype),
+    call = jax.ffi.ffi_call(_registered(dtype)[0], jax.ShapeDtypeStruct((k, k, x_BxHxWxC.shape[-1]), dtype),
                             vmap_method="sequential")
     settings = np.array([k, stride, pad_h, pad_w], np.int32)  # int32 in both of JAX's int modes
     return call(x_BxHxWxC, g_BxHoxWoxC.astype(dtype), settings)
