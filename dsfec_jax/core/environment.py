@@ -6,7 +6,7 @@ import os
 import platform
 
 from .provenance import versions
-from . import threads
+from . import host_memory, threads
 
 
 def cpu_model() -> str:
@@ -28,4 +28,4 @@ def xla_threads() -> int:
 
 def environment() -> dict:
     return {"cpu": cpu_model(), "cores": os.cpu_count(), "threads": xla_threads(),
-            "cpu_affinity": threads.available_cpus(), "versions": versions()}
+            "cpu_affinity": threads.available_cpus(), "glibc_hugetlb": host_memory.active(), "versions": versions()}

@@ -50,7 +50,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import zoo
-from ..core import atomic
+from ..core import atomic, host_memory
 from ..core import threads as thread_control
 from ..core.defaults import RUN_PILLARS
 from . import counting, op_breakdown, training_camera, training_rd
@@ -373,7 +373,7 @@ def measure(name: str, settings: Settings, compare: dict | None = None, threads:
                   "interleaved_times_ms": {k: summary(ms) for k, ms in samples["sgemm"].items()}},
         "configs": results, "comparison": comparison(results) if compare else None,
         "environment": {"cpu": cpu_model(), "threads_asked": threads, "xla_threads": xla_threads(),
-                        "cpu_affinity": thread_control.available_cpus(),
+                        "cpu_affinity": thread_control.available_cpus(), "glibc_hugetlb": host_memory.active(),
                         "versions": versions(("jax", "jaxlib", "flax", "numpy", "optax", "dsfec_jax"))},
     }
 

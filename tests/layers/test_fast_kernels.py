@@ -8,8 +8,8 @@ import pytest
 from jax import lax
 
 from dsfec_jax.layers import Conv, ConvTranspose, DepthwiseConv
-from dsfec_jax.layers.conv import (DIMS, FAST_CONV_MIN_CHANNELS, fast_conv, fast_shifted_depthwise, plain_conv,
-                                   shifted_depthwise, subpixel_conv_transpose)
+from dsfec_jax.layers.conv import (DIMS, FAST_CONV_MIN_CHANNELS, conv_kernel_grad, fast_conv, fast_shifted_depthwise,
+                                   plain_conv, pointwise_conv, shifted_depthwise, subpixel_conv_transpose)
 from dsfec_jax.models.dsfec.loss import LossConfig, detection_loss
 from conftest import as_float64, random_variables, tiny
 from train.test_train_step import toy_batch
@@ -112,14 +112,42 @@ def test_dense_conv_kernel_gradient_equals_autodiff(shape, kernel, cout):
     assert kernel == 1 or rel_err(jax.grad(lambda w: jnp.sum(jnp.sin(fast_conv(shifted, w))))(w), plain_g[1]) > 1e-2
 
 
+@pytest.mark.parametrize("pads", [((1, 0), (1, 0)), ((0, 2), (1, 1)), ((2, 1), (0, 0))])
+def test_dense_conv_kernel_gradient_with_explicit_pads(pads):
+    """The sub-pixel deconv's dense conv pads low and high unequally and its output is not
+    the input's size."""
+    x = jax.random.normal(jax.random.key(6), (2, 6, 7, 16))
+    w = jax.random.normal(jax.random.key(7), (2, 2, 16, 12)) * 0.2
+    plain_y, plain_g = grads(lambda x, w: plain_conv(x, w, pads), x, w)
+    fast_y, fast_g = grads(lambda x, w: fast_conv(x, w, pads), x, w)
+    np.testing.assert_array_equal(fast_y, plain_y)
+    assert rel_err(fast_g[0], plain_g[0]) < RTOL and rel_err(fast_g[1], plain_g[1]) < RTOL
+    # can fail: for a fixed output gradient, the other side's padding pairs it with other taps
+    g = jax.random.normal(jax.random.key(8), plain_y.shape)
+    swapped = tuple(p[::-1] for p in pads)
+    assert rel_err(conv_kernel_grad(x, g, 2, swapped), conv_kernel_grad(x, g, 2, pads)) > 1e-2
+
+
+@pytest.mark.parametrize("shape", [(2, 7, 9, 5), (3, 4, 6), (11, 8)])
+def test_pointwise_conv_gradient_equals_autodiff(shape):
+    x = jax.random.normal(jax.random.key(8), shape)
+    w = jax.random.normal(jax.random.key(9), (shape[-1], 6))
+    plain_y, plain_g = grads(jnp.dot, x, w)
+    fast_y, fast_g = grads(pointwise_conv, x, w)
+    np.testing.assert_array_equal(fast_y, plain_y)
+    assert rel_err(fast_g[0], plain_g[0]) < RTOL and rel_err(fast_g[1], plain_g[1]) < RTOL
+    assert "custom_vjp_call" in str(jax.make_jaxpr(pointwise_conv)(x, w))  # the hand-written backward runs
+
+
 @pytest.mark.parametrize("kernel", [1, 2, 3, 4])
 @pytest.mark.parametrize("stride", [1, 2, 3])
-def test_subpixel_upsampling_equals_conv_transpose(kernel, stride):
+@pytest.mark.parametrize("fast_grad", [False, True])
+def test_subpixel_upsampling_equals_conv_transpose(kernel, stride, fast_grad):
     x = jax.random.normal(jax.random.key(kernel), (2, 5, 7, 3))
     w = jax.random.normal(jax.random.key(stride), (kernel, kernel, 3, 4))
     plain = lambda x, w: lax.conv_transpose(x, w, (stride, stride), "SAME", dimension_numbers=DIMS)  # noqa: E731
     plain_y, plain_g = grads(plain, x, w)
-    fast_y, fast_g = grads(lambda x, w: subpixel_conv_transpose(x, w, stride), x, w)
+    fast_y, fast_g = grads(lambda x, w: subpixel_conv_transpose(x, w, stride, fast_grad), x, w)
     assert fast_y.shape == plain_y.shape == (2, 5 * stride, 7 * stride, 4)
     np.testing.assert_allclose(fast_y, plain_y, rtol=1e-5, atol=1e-5)
     assert rel_err(fast_g, plain_g) < RTOL
@@ -130,7 +158,9 @@ def test_subpixel_upsampling_equals_conv_transpose(kernel, stride):
                                     lambda k: Conv(6, 3, 2, kernels=k),
                                     lambda k: Conv(FAST_CONV_MIN_CHANNELS, 3, 1, kernels=k),
                                     lambda k: DepthwiseConv(3, 2, kernels=k),
-                                    lambda k: ConvTranspose(5, 3, 2, kernels=k)])
+                                    lambda k: ConvTranspose(5, 3, 2, kernels=k),
+                                    lambda k: ConvTranspose(FAST_CONV_MIN_CHANNELS, 3, 2, kernels=k),
+                                    lambda k: ConvTranspose(FAST_CONV_MIN_CHANNELS, 2, 2, kernels=k)])
 def test_each_layer_fast_equals_plain(module):
     x = jax.random.normal(jax.random.key(0), (2, 7, 6, FAST_CONV_MIN_CHANNELS))
     variables = module("plain").init(jax.random.key(1), x)
