@@ -33,6 +33,7 @@ formulation switch measured before against after in one run.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import json
 import os
@@ -97,12 +98,13 @@ class Settings:
     distinct_batches: int = 4
     breakdown: bool = True
     profile_steps: int = 3
+    lead_in: int = 1  # untimed calls of a program right before each timed one (time_interleaved)
     size_pillars: bool = True  # slots sized to the data as train.fit does; False: max_pillars slots
     budget_frames: int = BUDGET_FRAMES  # train frames the slots are sized on
     image_size: int = IMAGE_SIZE  # camera models: the letterbox's long side (a multiple of 32)
 
     def __post_init__(self):
-        for field, low in (("batch", 1), ("max_pillars", 1), ("repeats", 1), ("warmup", 0), ("budget_frames", 1),
+        for field, low in (("batch", 1), ("max_pillars", 1), ("repeats", 1), ("warmup", 0), ("budget_frames", 1), ("lead_in", 0),
                            ("distinct_batches", 1), ("profile_steps", 1)):
             value = getattr(self, field)
             if not isinstance(value, int) or value < low:
@@ -248,23 +250,37 @@ def sgemms(n: int = SGEMM_N) -> dict[str, Callable[[], None]]:
 # ---- timing -------------------------------------------------------------------------------------
 
 def time_interleaved(workloads: list[Workload], references: dict[str, Callable[[], None]], settings: Settings) -> dict:
-    """Per repetition: each program of each workload once, then each reference once. -> {label:
-    {program: [ms]}, 'sgemm': {reference: [ms]}} after `warmup` repetitions."""
+    """Per repetition: each program of each workload, then each reference, each timed in steady
+    state: `lead_in` untimed calls of the same program right before its timed call. -> {label:
+    {program: [ms]}, 'sgemm': {reference: [ms]}} after `warmup` repetitions.
+
+    Why the lead-in: a call right after another program pays for that program's buffers (XLA
+    frees its temporary buffer after each call and the next one maps and first-touches its own):
+    measured on DSFEC-L with huge pages, the eval forward took 276 ms right after the other
+    config's train step and 175-181 ms after an eval forward. A training loop runs steps back to
+    back and an inference loop forwards back to back, so each program is timed after itself;
+    repetitions still alternate the configs, so load drifts hit both alike."""
     samples: dict = {w.label: {p: [] for p in PROGRAMS} for w in workloads}
     samples["sgemm"] = {k: [] for k in references}
+
+    def timed(call: Callable[[], None]) -> float:
+        for _ in range(settings.lead_in):
+            call()
+        start = time.perf_counter()
+        call()
+        return 1e3 * (time.perf_counter() - start)
+
     for rep in range(settings.warmup + settings.repeats):
         keep = rep >= settings.warmup
         for w in workloads:
             for program in PROGRAMS:
-                start = time.perf_counter()
-                w.run(program, rep)
+                ms = timed(functools.partial(w.run, program, rep))
                 if keep:
-                    samples[w.label][program].append(1e3 * (time.perf_counter() - start))
+                    samples[w.label][program].append(ms)
         for reference, call in references.items():
-            start = time.perf_counter()
-            call()
+            ms = timed(call)
             if keep:
-                samples["sgemm"][reference].append(1e3 * (time.perf_counter() - start))
+                samples["sgemm"][reference].append(ms)
     return samples
 
 
@@ -525,7 +541,8 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True) -> str:
                   f"jax {env.get('versions', {}).get('jax', '?')}: batch {s['batch']}, "
                   f"{'whole-grid' if s['window'] is None else str(s['window']) + '-cell'} training windows, "
                   f"{_slots_text(s)}, median of {s['repeats']} interleaved repetitions after "
-                  f"{s['warmup']} warm-up. Analytic GFLOP/s count {content['flops_convention']}. Peak: "
+                  f"{s['warmup']} warm-up, each program timed right after {s.get('lead_in', 0)} untimed "
+                  f"call(s) of itself (steady state). Analytic GFLOP/s count {content['flops_convention']}. Peak: "
                   f"{content['peak_convention']}. Record: `dsfec_jax/profile/records/train_bench.json`."
                   + _rd_note(records, s) + _camera_note(records, s)]
     for r in records:

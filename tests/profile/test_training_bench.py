@@ -185,3 +185,26 @@ def test_settings_refuse_nonsense():
         training.Settings(batch=0)
     with pytest.raises(ValueError, match="window"):
         dataclasses.replace(SETTINGS, window=0)
+
+
+def test_each_program_is_timed_right_after_its_own_lead_in():
+    """A call right after another program pays for that program's freed buffers, so every timed
+    call follows `lead_in` untimed calls of the same program; configs still alternate."""
+    calls = []
+
+    class Fake:
+        def __init__(self, label):
+            self.label = label
+
+        def run(self, program, rep):
+            calls.append((self.label, program, rep))
+
+    settings = training.Settings(repeats=2, warmup=1, lead_in=2)
+    samples = training.time_interleaved([Fake("a"), Fake("b")], {"ref": lambda: calls.append(("sgemm",))}, settings)
+    assert all(len(samples[label][p]) == 2 for label in "ab" for p in training.PROGRAMS)
+    assert len(samples["sgemm"]["ref"]) == 2
+    per_rep = [c for c in calls if c[-1] == 0 or c == ("sgemm",)][: 3 * (2 * len(training.PROGRAMS) + 1)]
+    runs = [tuple(per_rep[i:i + 3]) for i in range(0, len(per_rep), 3)]
+    assert all(len(set(run)) == 1 for run in runs)  # three calls in a row of one program
+    assert [run[0][0] for run in runs] == ["a"] * len(training.PROGRAMS) + ["b"] * len(training.PROGRAMS) + ["sgemm"]
+    assert len(calls) == 3 * (2 * len(training.PROGRAMS) + 1) * 3  # (lead-in + timed) x programs x 3 repetitions
