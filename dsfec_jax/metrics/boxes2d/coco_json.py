@@ -91,6 +91,12 @@ def _bbox(value, where: str) -> list[float]:
         raise ValueError(f"{where}: expected [x, y, w, h] (4 numbers); got {value!r:.60}")
     x, y = (_number(v, where) for v in value[:2])
     w, h = (_number(v, where, minimum=0.0) for v in value[2:])
+    # boxes are kept as float32 corners: a corner past float32's range would become inf there
+    with np.errstate(over="ignore"):
+        corners = np.array([x, y, x + w, y + h], np.float64).astype(np.float32)
+    if not np.isfinite(corners).all():
+        raise ValueError(f"{where}: expected corners x, y, x + w, y + h within float32's range "
+                         f"(|v| <= {float(np.finfo(np.float32).max):.4g}); got {value!r:.60}")
     return [x, y, w, h]
 
 

@@ -289,3 +289,13 @@ def test_fuzzed_detections_read_or_raise_value_error(path, value, delete):
         assert "fuzz.json" in str(e)
         return
     assert set(dets) == set(gt.boxes)
+
+
+@pytest.mark.parametrize("bbox", [[3.4028235677973366e+38, 0, 1, 1], [3e38, 0, 3e38, 1], [0, -3.5e38, 1, 1]])
+def test_a_box_past_float32s_range_is_refused_by_name(bbox):
+    """Found by the fuzz test: a bbox finite in float64 but not as the float32 corners the boxes
+    are kept in would read, then write inf, which no reader takes back."""
+    data = copy.deepcopy(VALID_GT)
+    data["annotations"][0]["bbox"] = bbox
+    with pytest.raises(ValueError, match=r"big\.json: annotations\[0\]\.bbox: expected corners"):
+        coco_gt_from_dict(data, "big.json")
