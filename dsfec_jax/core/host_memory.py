@@ -59,6 +59,11 @@ def thp_mode(path: Path = THP_MODE) -> str | None:
     return text[start + 1:end] if 0 <= start < end else None
 
 
+def _tunables(value: str) -> dict[str, str]:
+    """GLIBC_TUNABLES 'name=value:name=value' -> {name: value}."""
+    return dict(item.partition("=")[::2] for item in value.split(":") if item)
+
+
 def tunables_with_hugepages(env: dict[str, str], glibc: tuple[int, int] | None, thp: str | None) -> str | None:
     """The GLIBC_TUNABLES value to restart with, or None where nothing should change: opted out,
     not glibc >= 2.35 on Linux, THP off ('never' or unknown), or the tunable already set (by the
@@ -66,7 +71,7 @@ def tunables_with_hugepages(env: dict[str, str], glibc: tuple[int, int] | None, 
     if env.get(OPT_OUT, "1") == "0" or glibc is None or glibc < MIN_GLIBC or thp not in ("always", "madvise"):
         return None
     current = env.get("GLIBC_TUNABLES", "")
-    if any(item.split("=")[0] == TUNABLE for item in current.split(":") if item):
+    if TUNABLE in _tunables(current):
         return None
     return f"{current}:{SETTING}" if current else SETTING
 
@@ -103,13 +108,13 @@ def relaunch_with_hugepages() -> None:
 
 def relaunch_project_command() -> None:
     """`relaunch_with_hugepages` when this process is one of the project's commands."""
-    if is_project_command(list(getattr(sys, "orig_argv", []))):
+    if is_project_command(sys.orig_argv):
         relaunch_with_hugepages()
 
 
 def active() -> bool:
     """Whether this process started with glibc's huge-page tunable on (recorded with benchmarks)."""
-    return any(item == SETTING for item in os.environ.get("GLIBC_TUNABLES", "").split(":"))
+    return _tunables(os.environ.get("GLIBC_TUNABLES", "")).get(TUNABLE) == "1"
 
 
 if __name__ == "__main__":

@@ -104,8 +104,8 @@ class Settings:
     image_size: int = IMAGE_SIZE  # camera models: the letterbox's long side (a multiple of 32)
 
     def __post_init__(self):
-        for field, low in (("batch", 1), ("max_pillars", 1), ("repeats", 1), ("warmup", 0), ("budget_frames", 1), ("lead_in", 0),
-                           ("distinct_batches", 1), ("profile_steps", 1)):
+        for field, low in (("batch", 1), ("max_pillars", 1), ("repeats", 1), ("warmup", 0), ("budget_frames", 1),
+                           ("distinct_batches", 1), ("profile_steps", 1), ("lead_in", 0)):
             value = getattr(self, field)
             if not isinstance(value, int) or value < low:
                 raise ValueError(f"train bench: {field}={value!r}; expected an integer >= {low}")

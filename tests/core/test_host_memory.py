@@ -52,8 +52,8 @@ def test_thp_mode_reads_the_bracketed_word(tmp_path):
 @pytest.mark.skipif(hm.tunables_with_hugepages({}, hm.glibc_version(), hm.thp_mode()) is None,
                     reason="this machine has no glibc >= 2.35 with THP")
 def test_a_project_command_restarts_with_the_tunable_and_its_arguments():
-    """`python -m dsfec_jax.core.host_memory_probe a b` runs (after one exec) with hugetlb=1 in
-    GLIBC_TUNABLES, the same arguments, and its exit code; DSFEC_HUGEPAGES=0 keeps the defaults."""
+    """`python -m dsfec_jax.core.host_memory --probe 'a b' c` runs (after one exec) with hugetlb=1
+    in GLIBC_TUNABLES, the same arguments, and its exit code; DSFEC_HUGEPAGES=0 keeps the defaults."""
     env = {k: v for k, v in os.environ.items() if k not in ("GLIBC_TUNABLES", hm.OPT_OUT)}
     root = Path(__file__).resolve().parents[2]
     command = [sys.executable, "-m", "dsfec_jax.core.host_memory", "--probe", "a b", "c"]
