@@ -5,7 +5,7 @@ from __future__ import annotations
 import flax.linen as nn
 
 from .activations import activation
-from .conv import PointLinear
+from .conv import Kernels, PointLinear
 
 
 def check_fec_filters(filters: tuple[int, ...]) -> None:
@@ -26,10 +26,11 @@ class FEC(nn.Module):
 
     filters: tuple[int, int, int] = (32, 128, 12)
     act: str = "relu"
+    kernels: Kernels = "fast"
 
     def setup(self):
         check_fec_filters(self.filters)
-        self.layers = [PointLinear(f, name=f"conv{i + 1}") for i, f in enumerate(self.filters)]
+        self.layers = [PointLinear(f, kernels=self.kernels, name=f"conv{i + 1}") for i, f in enumerate(self.filters)]
 
     def __call__(self, x_BxPxNxD, mask_BxPxN=None, train: bool = False):
         act = activation(self.act)

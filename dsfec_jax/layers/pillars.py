@@ -13,7 +13,7 @@ import jax.numpy as jnp
 
 from ..core.grid import Grid
 from .activations import activation
-from .conv import PointLinear, batch_norm
+from .conv import Kernels, PointLinear, batch_norm
 from .fec import FEC
 
 NEG = -1e9  # masked-out points never win the max; finite so gradients stay finite
@@ -46,10 +46,11 @@ class PointPillarsEncoder(nn.Module):
 
     features: int = 32
     act: str = "relu"
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, x_BxPxNxD, mask_BxPxN, train: bool = False):
-        x = PointLinear(self.features, use_bias=False, name="linear")(x_BxPxNxD)
+        x = PointLinear(self.features, use_bias=False, kernels=self.kernels, name="linear")(x_BxPxNxD)
         # a batch without a single point (a training window outside a narrow field of view)
         # would give BN statistics of 0/0 = NaN: let it see the zero slots instead
         bn_mask = jnp.where(mask_BxPxN.any(), mask_BxPxN, True)
@@ -64,14 +65,15 @@ class PillarFeatureNet(nn.Module):
     encoder: str = "fec"  # "fec" | "pointpillars"
     filters: tuple[int, ...] = (32, 128, 12)
     act: str = "relu"
+    kernels: Kernels = "fast"
 
     @nn.compact
     def __call__(self, points_BxPxNxF, mask_BxPxN, coords_BxPx2, train: bool = False, origin_Bx2=None):
         x = decorate_points(points_BxPxNxF, mask_BxPxN, coords_BxPx2, self.grid, origin_Bx2)
         if self.encoder == "fec":
-            h = FEC(tuple(self.filters), self.act, name="fec")(x, mask_BxPxN, train)
+            h = FEC(tuple(self.filters), self.act, self.kernels, name="fec")(x, mask_BxPxN, train)
         elif self.encoder == "pointpillars":
-            h = PointPillarsEncoder(self.filters[-1], self.act, name="pointpillars")(x, mask_BxPxN, train)
+            h = PointPillarsEncoder(self.filters[-1], self.act, self.kernels, name="pointpillars")(x, mask_BxPxN, train)
         else:
             raise ValueError(f"encoder={self.encoder!r}; valid: 'fec', 'pointpillars'")
         return masked_max(h, mask_BxPxN)

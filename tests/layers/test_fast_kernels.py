@@ -8,7 +8,7 @@ import pytest
 from jax import lax
 
 from dsfec_jax.layers import Conv, ConvTranspose, DepthwiseConv
-from dsfec_jax.layers.conv import (DIMS, FAST_CONV_MIN_CHANNELS, conv_kernel_grad, fast_conv, fast_shifted_depthwise,
+from dsfec_jax.layers.conv import (DIMS, FAST_CONV_MIN_CHANNELS, PointLinear, conv_kernel_grad, fast_conv, fast_shifted_depthwise,
                                    plain_conv, pointwise_conv, shifted_depthwise, subpixel_conv_transpose)
 from dsfec_jax.models.dsfec.loss import LossConfig, detection_loss
 from conftest import as_float64, random_variables, tiny
@@ -95,11 +95,20 @@ def test_depthwise_kernel_gradient_of_other_dtypes_stays_in_xla():
     assert "dsfec_depthwise_kernel_grad" not in lowered
 
 
+@pytest.fixture(params=["per_image", "whole_batch"])
+def kernel_grad_path(request, monkeypatch):
+    """Both forms of `conv_kernel_grad`: the threshold picks one for any image size."""
+    from dsfec_jax.layers import conv
+
+    monkeypatch.setattr(conv, "PER_IMAGE_KERNEL_GRAD_MIN_PIXELS", 0 if request.param == "per_image" else 10**9)
+    return request.param
+
+
 @pytest.mark.parametrize("shape,kernel,cout", [((2, 7, 9, 16), 3, 16), ((3, 6, 5, 17), 3, 20),
                                               ((1, 8, 8, 16), 5, 18), ((2, 6, 7, 16), 2, 16), ((2, 5, 5, 3), 1, 4)])
-def test_dense_conv_kernel_gradient_equals_autodiff(shape, kernel, cout):
-    """The per-image tap products give XLA's kernel gradient: odd and even kernels ('SAME' pads
-    low and high unequal), odd sizes, batch 1-3."""
+def test_dense_conv_kernel_gradient_equals_autodiff(shape, kernel, cout, kernel_grad_path):
+    """The tap products, per image or over the whole batch, give XLA's kernel gradient: odd and
+    even kernels ('SAME' pads low and high unequal), odd sizes, batch 1-3."""
     x = jax.random.normal(jax.random.key(4), shape)
     w = jax.random.normal(jax.random.key(5), (kernel, kernel, shape[-1], cout)) * 0.2
     plain_y, plain_g = grads(plain_conv, x, w)
@@ -113,7 +122,7 @@ def test_dense_conv_kernel_gradient_equals_autodiff(shape, kernel, cout):
 
 
 @pytest.mark.parametrize("pads", [((1, 0), (1, 0)), ((0, 2), (1, 1)), ((2, 1), (0, 0))])
-def test_dense_conv_kernel_gradient_with_explicit_pads(pads):
+def test_dense_conv_kernel_gradient_with_explicit_pads(pads, kernel_grad_path):
     """The sub-pixel deconv's dense conv pads low and high unequally and its output is not
     the input's size."""
     x = jax.random.normal(jax.random.key(6), (2, 6, 7, 16))
@@ -158,6 +167,8 @@ def test_subpixel_upsampling_equals_conv_transpose(kernel, stride, fast_grad):
                                     lambda k: Conv(6, 3, 2, kernels=k),
                                     lambda k: Conv(FAST_CONV_MIN_CHANNELS, 3, 1, kernels=k),
                                     lambda k: DepthwiseConv(3, 2, kernels=k),
+                                    lambda k: PointLinear(6, kernels=k),
+                                    lambda k: PointLinear(6, use_bias=False, kernels=k),
                                     lambda k: ConvTranspose(5, 3, 2, kernels=k),
                                     lambda k: ConvTranspose(FAST_CONV_MIN_CHANNELS, 3, 2, kernels=k),
                                     lambda k: ConvTranspose(FAST_CONV_MIN_CHANNELS, 2, 2, kernels=k)])
@@ -171,6 +182,14 @@ def test_each_layer_fast_equals_plain(module):
     (plain_y, plain_g), (fast_y, fast_g) = run("plain"), run("fast")
     np.testing.assert_allclose(fast_y, plain_y, rtol=1e-5, atol=1e-5)
     assert rel_err(fast_g, plain_g) < RTOL
+
+
+@pytest.mark.parametrize("kernels,hand_written", [("fast", True), ("plain", False)])
+def test_point_linear_trains_with_the_pointwise_backward_only_when_fast(kernels, hand_written):
+    x = jnp.ones((2, 5, 3, 7))
+    layer = PointLinear(4, kernels=kernels)
+    variables = layer.init(jax.random.key(0), x)
+    assert ("custom_vjp_call" in str(jax.make_jaxpr(lambda v: layer.apply(v, x))(variables))) == hand_written
 
 
 def test_an_unknown_kernels_value_names_the_field():

@@ -118,7 +118,7 @@ class DSFECNet(nn.Module):
     def setup(self):
         c = self.cfg
         filters = c.fec_filters if c.encoder == "fec" else (c.pointpillars_filters,)
-        self.pillar_net = PillarFeatureNet(c.grid, c.encoder, tuple(filters), c.act_fec)
+        self.pillar_net = PillarFeatureNet(c.grid, c.encoder, tuple(filters), c.act_fec, c.kernels)
         self.stem = [ConvBNAct(c.stem_filters, 3, 1, c.act_stem, c.kernels, name=f"stem{i}") for i in range(c.stem_convs)]
         self.stages = [self._stage(i) for i in range(4)]
         self.neck = TopDownNeck(tuple(c.neck_widths), c.kernels)

@@ -150,7 +150,7 @@ class RadarNeXtNet(nn.Module):
 
     def setup(self):
         c = self.cfg
-        self.pillar_net = PillarFeatureNet(c.grid, "pointpillars", (c.pillar_filters,), "relu")
+        self.pillar_net = PillarFeatureNet(c.grid, "pointpillars", (c.pillar_filters,), "relu", c.kernels)
         if c.backbone == "rep_dwc":
             self.backbone_net = RepDWCBackbone(tuple(c.layer_nums), tuple(c.channels), c.branches, c.deploy,
                                                c.depthwise_impl, c.kernels)
