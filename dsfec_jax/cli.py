@@ -482,10 +482,11 @@ def run_train_bench(args) -> int:
     except (ValueError, RuntimeError) as err:  # unknown model or field, more threads than CPUs, a failed worker
         sys.exit(f"dsfec bench --train: {err}")
     content = training.payload(command_line(args), records, settings, compare)
-    training.write(args.out or training.RECORD, content)
+    record = args.out or training.RECORD
+    training.write(record, content)
     if args.readme:
-        training.update_readme(args.readme, content)
-    print(json.dumps(content, indent=2) if args.json else training.markdown(content))
+        training.update_readme(args.readme, content, record)
+    print(json.dumps(content, indent=2) if args.json else training.markdown(content, record=record))
     return 0
 
 

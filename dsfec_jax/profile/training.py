@@ -507,9 +507,9 @@ def _slots_text(settings: dict) -> str:
     return f"{settings['max_pillars']} pillar slots"
 
 
-def markdown(content: dict, breakdown_rows: int = 6, full: bool = True) -> str:
+def markdown(content: dict, breakdown_rows: int = 6, full: bool = True, record: str | Path = RECORD) -> str:
     """The figures table, the comparison table (with --compare) and each step's breakdown
-    (full=False: its module table only)."""
+    (full=False: its module table only); `record`: the file the content was written to."""
     records = content["records"]
     lines = ["| model | config | threads | pillar slots | train frames/s | step ms | eval fwd ms | train fwd ms | fwd+bwd ms "
              "| fwd+bwd / eval | step GFLOP/s (3 x fwd) | % sgemm | step GFLOP/s (XLA) | % sgemm | sgemm GFLOP/s (XLA / numpy) "
@@ -543,7 +543,7 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True) -> str:
                   f"{_slots_text(s)}, median of {s['repeats']} interleaved repetitions after "
                   f"{s['warmup']} warm-up, each program timed right after {s.get('lead_in', 0)} untimed "
                   f"call(s) of itself (steady state). Analytic GFLOP/s count {content['flops_convention']}. Peak: "
-                  f"{content['peak_convention']}. Record: `dsfec_jax/profile/records/train_bench.json`."
+                  f"{content['peak_convention']}. Record: `{_record_text(record)}`."
                   + _rd_note(records, s) + _camera_note(records, s)]
     for r in records:
         for c in r["configs"]:
@@ -553,13 +553,25 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True) -> str:
     return "\n".join(lines)
 
 
+def _record_text(record: str | Path) -> str:
+    """The record's path as the README names it: from the repository root when it lies inside it."""
+    path = Path(record).resolve()
+    root = Path(__file__).resolve().parents[2]
+    return str(path.relative_to(root)) if path.is_relative_to(root) else str(record)
+
+
+def _model_names(records: list[dict]) -> str:
+    """Each model once, in order (a model measured at several thread counts has several records)."""
+    return ", ".join(dict.fromkeys(r["model"] for r in records))
+
+
 def _rd_note(records: list[dict], settings: dict) -> str:
     """What differs for the range-Doppler records of a table ('' when it has none)."""
     rd = [r for r in records if r.get("family") and zoo.FAMILIES[r["family"]].modality == "rd"]
     if not rd:
         return ""
     shape = next(iter(rd[0]["configs"][0]["input"].values()))
-    return (f" Range-Doppler models ({', '.join(r['model'] for r in rd)}): batch {settings['batch']} whole "
+    return (f" Range-Doppler models ({_model_names(rd)}): batch {settings['batch']} whole "
             f"{shape[1]} x {shape[2]} RD maps (heat and gray) of the synthetic RD benchmark, augmented and with "
             "padded box targets as train/fit_rd.py makes them; windows and pillar slots do not apply; the step is the "
             "family's quick schedule's (ultralytics' SGD summing gradients to a nominal batch of 64).")
@@ -571,7 +583,7 @@ def _camera_note(records: list[dict], settings: dict) -> str:
     if not camera:
         return ""
     shape = next(iter(camera[0]["configs"][0]["input"].values()))
-    return (f" Camera models ({', '.join(r['model'] for r in camera)}): batch {settings['batch']} street train "
+    return (f" Camera models ({_model_names(camera)}): batch {settings['batch']} street train "
             f"images letterboxed to {shape[1]} x {shape[2]} with darknet's augmentations and padded box targets as "
             "train/fit_camera.py makes them (one input size, no multi-scale), the street benchmark's 5 classes; "
             "windows and pillar slots do not apply; the step is the family's quick schedule's (AdamW).")
@@ -587,10 +599,10 @@ def check_readme(readme: str | Path) -> str:
     return text
 
 
-def update_readme(readme: str | Path, content: dict) -> None:
+def update_readme(readme: str | Path, content: dict, record: str | Path = RECORD) -> None:
     """Replace the text between the train-bench markers of `readme` with the table."""
     text = check_readme(readme)
-    block = f"{README_START}\n{markdown(content, breakdown_rows=5, full=False)}\n{README_END}"
+    block = f"{README_START}\n{markdown(content, breakdown_rows=5, full=False, record=record)}\n{README_END}"
     text = re.sub(re.escape(README_START) + ".*?" + re.escape(README_END), lambda _: block, text, flags=re.S)
     atomic.write_text(readme, text)
 

@@ -147,6 +147,13 @@ def test_bench_table_says_what_differs_for_rd_models():
     table = training.markdown(content)
     assert "| yolov8n | default | 2 | - | 200.00 |" in table
     assert "Range-Doppler models (yolov8n): batch 2 whole 256 x 64 RD maps" in table
+    assert "Record: `dsfec_jax/profile/records/train_bench.json`" in table
+    # one model at two thread counts is named once; the record is the file --out wrote
+    two = training.payload("x", [rd_rec, {**rd_rec, "threads": 1}], SETTINGS, None)
+    table = training.markdown(two, record="/tmp/elsewhere/rd.json")
+    assert "Range-Doppler models (yolov8n): batch" in table and "Record: `/tmp/elsewhere/rd.json`" in table
+    in_repo = training.RECORD.parent / "train_bench_rd.json"
+    assert "Record: `dsfec_jax/profile/records/train_bench_rd.json`" in training.markdown(two, record=in_repo)
     point_rec = fake_record("dsfec_s", {"points": [8, 96, 8, 7]})
     assert "Range-Doppler" not in training.markdown(training.payload("x", [point_rec], SETTINGS, None))
 
