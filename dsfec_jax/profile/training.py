@@ -335,6 +335,8 @@ def figures(w: Workload, samples: dict, peak_gflop_per_s: float, batch: int) -> 
         "compile_s": {p: round(s, 2) for p, s in w.compile_s.items()},
         "frames_per_s": round(batch / (median["step"] / 1e3), 3),
         "fwd_bwd_over_eval": round(median["fwd_bwd"] / median["eval_forward"], 3),
+        # the same ratio within each repetition: its spread is the noise of the figure above
+        "fwd_bwd_over_eval_by_repetition": summary([b / e for b, e in zip(samples["fwd_bwd"], samples["eval_forward"])]),
         "step_over_fwd_bwd": round(median["step"] / median["fwd_bwd"], 3),
         "gflops": {"analytic": {p: _significant(v) for p, v in analytic.items()},
                    "xla": {p: None if v is None else _significant(v) for p, v in xla.items()}},
@@ -500,6 +502,14 @@ def _f(value, digits: int = 1) -> str:
     return "-" if value is None else f"{value:.{digits}f}"
 
 
+def _ratio_text(config: dict) -> str:
+    """fwd + bwd / eval of the medians, with the p10-p90 range of the ratio within each
+    repetition where the record has it (records written before it do not)."""
+    spread = config.get("fwd_bwd_over_eval_by_repetition")
+    text = f"{config['fwd_bwd_over_eval']:.2f}"
+    return text if spread is None else f"{text} ({spread['p10']:.2f}-{spread['p90']:.2f})"
+
+
 def _slots_text(settings: dict) -> str:
     if settings.get("size_pillars", False):
         return (f"pillar slots sized to the data as training sizes them (data.points.pillarize.pillar_budget on "
@@ -512,7 +522,7 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True, record: 
     (full=False: its module table only); `record`: the file the content was written to."""
     records = content["records"]
     lines = ["| model | config | threads | pillar slots | train frames/s | step ms | eval fwd ms | train fwd ms | fwd+bwd ms "
-             "| fwd+bwd / eval | step GFLOP/s (3 x fwd) | % sgemm | step GFLOP/s (XLA) | % sgemm | sgemm GFLOP/s (XLA / numpy) "
+             "| fwd+bwd / eval (p10-p90 by repetition) | step GFLOP/s (3 x fwd) | % sgemm | step GFLOP/s (XLA) | % sgemm | sgemm GFLOP/s (XLA / numpy) "
              "| compile s (step) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in records:
@@ -522,7 +532,7 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True, record: 
             config = "default" if c["label"] == "default" else _overrides_text(content["compare"])
             lines.append(
                 f"| {r['model']} | {config} | {r['threads']} | {c.get('pillar_slots', '-')} | {c['frames_per_s']:.2f} | {t['step']:.1f} "
-                f"| {t['eval_forward']:.1f} | {t['train_forward']:.1f} | {t['fwd_bwd']:.1f} | {c['fwd_bwd_over_eval']:.2f} "
+                f"| {t['eval_forward']:.1f} | {t['train_forward']:.1f} | {t['fwd_bwd']:.1f} | {_ratio_text(c)} "
                 f"| {_f(c['gflop_per_s']['analytic']['step'])} | {_f(c['percent_of_peak']['analytic']['step'])} "
                 f"| {_f(c['gflop_per_s']['xla']['step'])} | {_f(c['percent_of_peak']['xla']['step'])} "
                 f"| {_f(by_ref.get('xla'), 0)} / {_f(by_ref.get('numpy'), 0)} | {c['compile_s']['step']:.1f} |")

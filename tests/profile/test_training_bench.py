@@ -49,6 +49,10 @@ def test_the_record_holds_every_figure(record):
         assert all(positive(s) for s in config["compile_s"].values())
         for key in ("frames_per_s", "fwd_bwd_over_eval", "step_over_fwd_bwd"):
             assert positive(config[key]), key
+        # one repetition: its own ratio is the ratio of the medians
+        by_rep = config["fwd_bwd_over_eval_by_repetition"]
+        assert by_rep["n"] == SETTINGS.repeats
+        assert by_rep["p10"] == by_rep["median"] == by_rep["p90"] == pytest.approx(config["fwd_bwd_over_eval"], abs=2e-3)
         analytic = config["gflops"]["analytic"]
         assert positive(analytic["eval_forward"]) and analytic["step"] == pytest.approx(3 * analytic["eval_forward"], rel=1e-3)
         assert positive(config["gflops"]["xla"]["step"])  # XLA's CPU backend counts FLOPs
@@ -86,6 +90,8 @@ def test_markdown_and_readme(record, tmp_path):
     content = training.payload("dsfec bench --train", [record], SETTINGS, COMPARE)
     table = training.markdown(content)
     assert "| dsfec_s | default |" in table and "notes=same network" in table and "Op time per step" in table
+    spread = record["configs"][0]["fwd_bwd_over_eval_by_repetition"]
+    assert f"| {record['configs'][0]['fwd_bwd_over_eval']:.2f} ({spread['p10']:.2f}-{spread['p90']:.2f}) |" in table
     readme = tmp_path / "README.md"
     readme.write_text(f"intro\n{training.README_START}\nold\n{training.README_END}\nend\n")
     training.update_readme(readme, content)
