@@ -38,7 +38,7 @@ from dsfec_jax.predict import Predictor
 from dsfec_jax.profile.records import profile
 from dsfec_jax.train.loss_watch import LossWatch, NonFiniteLoss
 from dsfec_jax.train.schedules import optimizer
-from dsfec_jax.train.step import init_state, train_step_fn
+from dsfec_jax.train.step import batch_on_device, init_state, train_step_fn
 
 from .inherit import initial_variables
 from .journal import Journal
@@ -258,7 +258,7 @@ def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, pat
     state = init_state(supernet, tx, jax.random.key(seed), init)
     step_fn = supernet_step(supernet, tx)
     losses = LossWatch()
-    with Prefetcher(stream.batch, range(steps)) as batches:
+    with Prefetcher(lambda s: batch_on_device(stream.batch(s)), range(steps)) as batches:
         for step, batch in batches:
             round_, pos = divmod(step, len(depths))
             i = int(np.random.default_rng([seed, 7, round_]).permutation(len(depths))[pos])

@@ -1,24 +1,32 @@
-"""Transparent huge pages for XLA's CPU buffers: the project's commands restart themselves once
-with glibc's `glibc.malloc.hugetlb=1` tunable.
+"""How the project's commands set up the host memory XLA's CPU client runs in: they restart
+once with glibc tunables (and JAX's CPU dispatch mode) that suit a training step's buffers.
 
 Why: XLA's CPU client allocates each call's temporary buffer afresh (1.6 GB for a DSFEC-L
-training step at batch 8 on 96-cell windows) and frees it after. glibc serves that with mmap and
-munmap, so every step first-touches 400 000 fresh 4 KiB pages (the kernel zeroes each in a page
-fault, inside whatever op writes it first) and then unmaps them, which holds the address-space
-lock the next call's mmap waits on. Under `perf`, page faults and their kernel work were ~15 % of
-a step's samples, and each call started ~100 ms late. With `hugetlb=1`, glibc advises the kernel
-(madvise MADV_HUGEPAGE) to back such mappings with 2 MiB pages: 512x fewer faults and cheaper
-unmaps. Measured on the 2-core EPYC, steady-state train step: DSFEC-L 1158 -> 863 ms, DSFEC-S
-384-414 -> 270-283 ms. Keeping freed memory in the process instead (arena_max=1, mmap_max=0)
-was slower than this (976 ms; 413 ms).
+training step at batch 8 on 96-cell windows) and frees it after. With glibc's defaults that is
+an mmap and a munmap a call, so every step first-touches fresh pages (the kernel zeroes each in a
+page fault, inside whatever op writes it first), and the unmap holds the address-space lock the
+next call's mmap waits on. Two settings answer it:
+- `glibc.malloc.hugetlb=1`: glibc advises the kernel (madvise MADV_HUGEPAGE) to back such
+  mappings with 2 MiB pages, 512x fewer faults and cheaper unmaps. Steady-state train step on
+  the 2-core EPYC: DSFEC-L 1158 -> 863 ms, DSFEC-S 384-414 -> 270-283 ms.
+- Keeping the buffer in the process: `glibc.malloc.mmap_max=0` (large blocks come from the heap,
+  not from mmap) with a trim threshold no heap reaches (freed memory stays), and JAX's
+  `jax_cpu_enable_async_dispatch` off, so that XLA runs each call inline on the calling thread. Both are needed: an asynchronous call runs on a pool
+  thread, whose glibc arena cannot hold a block that large and maps it afresh anyway. The step's
+  inputs must also be ready when it is called (train.step.batch_on_device), or XLA defers the
+  call to a pool thread. Then the main thread's heap hands the same pages back every call: page
+  faults ~1000 -> ~20 a step; the real training loop 1.04-1.06x faster (DSFEC-S and DSFEC-L).
+  The cost: the process keeps its peak heap until it exits, as a caching allocator would.
 
-glibc reads its tunables only at start-up, so the setting can only come from the environment
-the process starts with. `relaunch_with_hugepages` execs the same command line again with
-GLIBC_TUNABLES extended; `dsfec_jax/__init__.py` calls it when the process runs one of the
-project's commands (`dsfec ...`, `python -m dsfec_jax... | search... | experiments...`), so
-library users and the test runner are never re-executed. DSFEC_HUGEPAGES=0 turns it off.
-Glibc >= 2.35 on Linux, with THP not set to 'never'; anywhere else nothing happens.
-No jax import here: this runs before XLA starts.
+glibc reads its tunables only at start-up, so the settings can only come from the environment
+the process starts with. `relaunch_with_host_settings` execs the same command line again with
+GLIBC_TUNABLES extended; `dsfec_jax/__init__.py` calls `relaunch_project_command` when the
+process runs one of the project's commands (`dsfec ...`, `python -m dsfec_jax... | search... |
+experiments...`), which then turns async dispatch off where the heap keeps buffers. So library
+users and the test runner are never re-executed and keep JAX's defaults. A tunable the user
+already gave stands (and where it is one of KEEP_BUFFERS, dispatch stays asynchronous).
+DSFEC_HUGEPAGES=0 leaves all of it at the defaults. Glibc >= 2.35 on Linux; huge pages only
+with THP not set to 'never'. jax is imported only to set its dispatch, before XLA starts.
 """
 
 from __future__ import annotations
@@ -26,11 +34,14 @@ from __future__ import annotations
 import os
 import platform
 import sys
+import warnings
 from pathlib import Path
 
 TUNABLE = "glibc.malloc.hugetlb"
 SETTING = f"{TUNABLE}=1"
-OPT_OUT = "DSFEC_HUGEPAGES"  # "0": leave glibc's defaults
+KEEP_BUFFERS = {"glibc.malloc.mmap_max": "0", "glibc.malloc.trim_threshold": str(1 << 40)}  # 1 TiB: never trimmed
+ASYNC_DISPATCH = "jax_cpu_enable_async_dispatch"  # jax's config option (it reads no env variable for it)
+OPT_OUT = "DSFEC_HUGEPAGES"  # "0": leave glibc's and JAX's defaults
 MIN_GLIBC = (2, 35)  # the first glibc with glibc.malloc.hugetlb
 THP_MODE = Path("/sys/kernel/mm/transparent_hugepage/enabled")
 COMMAND_PACKAGES = ("dsfec_jax", "search", "experiments")  # python -m <these>: the project's commands
@@ -64,16 +75,18 @@ def _tunables(value: str) -> dict[str, str]:
     return dict(item.partition("=")[::2] for item in value.split(":") if item)
 
 
-def tunables_with_hugepages(env: dict[str, str], glibc: tuple[int, int] | None, thp: str | None) -> str | None:
+def relaunch_tunables(env: dict[str, str], glibc: tuple[int, int] | None, thp: str | None) -> str | None:
     """The GLIBC_TUNABLES value to restart with, or None where nothing should change: opted out,
-    not glibc >= 2.35 on Linux, THP off ('never' or unknown), or the tunable already set (by the
-    user, whatever its value, or by a first relaunch)."""
-    if env.get(OPT_OUT, "1") == "0" or glibc is None or glibc < MIN_GLIBC or thp not in ("always", "madvise"):
+    not glibc >= 2.35 on Linux, or every setting already there (given by the user, whatever its
+    value, or by a first relaunch). Huge pages only where THP is on ('always' or 'madvise')."""
+    if env.get(OPT_OUT, "1") == "0" or glibc is None or glibc < MIN_GLIBC:
         return None
+    wanted = {**({TUNABLE: "1"} if thp in ("always", "madvise") else {}), **KEEP_BUFFERS}
     current = env.get("GLIBC_TUNABLES", "")
-    if TUNABLE in _tunables(current):
+    added = [f"{name}={value}" for name, value in wanted.items() if name not in _tunables(current)]
+    if not added:
         return None
-    return f"{current}:{SETTING}" if current else SETTING
+    return ":".join([current, *added] if current else added)
 
 
 def is_project_command(orig_argv: list[str]) -> bool:
@@ -93,12 +106,12 @@ def is_project_command(orig_argv: list[str]) -> bool:
     return False
 
 
-def relaunch_with_hugepages() -> None:
-    """Exec this interpreter again with the same arguments and GLIBC_TUNABLES extended by
-    `glibc.malloc.hugetlb=1`; return without doing anything where that does not apply."""
+def relaunch_with_host_settings() -> None:
+    """Exec this interpreter again with the same arguments and GLIBC_TUNABLES extended
+    (`relaunch_tunables`); return without doing anything where that does not apply."""
     if platform.system() != "Linux":
         return
-    value = tunables_with_hugepages(dict(os.environ), glibc_version(), thp_mode())
+    value = relaunch_tunables(dict(os.environ), glibc_version(), thp_mode())
     if value is None:
         return
     sys.stdout.flush()
@@ -107,9 +120,26 @@ def relaunch_with_hugepages() -> None:
 
 
 def relaunch_project_command() -> None:
-    """`relaunch_with_hugepages` when this process is one of the project's commands."""
+    """For one of the project's commands: `relaunch_with_host_settings`, then (in the process that
+    goes on) async dispatch off where the heap keeps buffers."""
     if is_project_command(sys.orig_argv):
-        relaunch_with_hugepages()
+        relaunch_with_host_settings()
+        if heap_keeps_buffers():
+            try:
+                dispatch_inline()
+            except RuntimeError as err:  # slower, not wrong: the command goes on
+                warnings.warn(f"{err}; XLA's calls stay asynchronous")
+
+
+def dispatch_inline() -> None:
+    """Turn JAX's async dispatch off for the CPU; RuntimeError once XLA's backends exist, where
+    the option would silently do nothing (it is read when the CPU client is made)."""
+    import jax
+    from jax._src import xla_bridge
+
+    if xla_bridge.backends_are_initialized():
+        raise RuntimeError(f"{ASYNC_DISPATCH} must be set before XLA's CPU client is made; it already is")
+    jax.config.update(ASYNC_DISPATCH, False)
 
 
 def active() -> bool:
@@ -117,9 +147,26 @@ def active() -> bool:
     return _tunables(os.environ.get("GLIBC_TUNABLES", "")).get(TUNABLE) == "1"
 
 
+def heap_keeps_buffers() -> bool:
+    """Whether this process started with glibc's KEEP_BUFFERS tunables."""
+    tunables = _tunables(os.environ.get("GLIBC_TUNABLES", ""))
+    return all(tunables.get(k) == v for k, v in KEEP_BUFFERS.items())
+
+
+def keeps_buffers() -> bool:
+    """Whether this process keeps XLA's temporary buffers between calls: the heap's tunables and
+    async dispatch off (recorded with benchmarks)."""
+    import jax
+
+    return heap_keeps_buffers() and not jax.config.read(ASYNC_DISPATCH)
+
+
 if __name__ == "__main__":
     # `python -m dsfec_jax.core.host_memory --probe ...`: prints what the (relaunched) process
     # started with and exits 3, for tests/core/test_host_memory.py
     print(os.environ.get("GLIBC_TUNABLES", ""))
     print(sys.argv[1:])
+    import jax
+
+    print(jax.config.read(ASYNC_DISPATCH))
     sys.exit(3)

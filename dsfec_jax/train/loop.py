@@ -38,7 +38,7 @@ from ..data.batches import BatchStream
 from ..data.prefetch import Prefetcher
 from .loss_watch import LossWatch, NonFiniteLoss
 from .schedules import Schedule, optimizer
-from .step import init_state, make_train_step
+from .step import batch_on_device, init_state, make_train_step
 
 
 log = logging.getLogger(__name__)
@@ -217,7 +217,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     scores = None
     losses = LossWatch()
     t0 = time.perf_counter()
-    with open(log_path, "a") as log, Prefetcher(stream.batch, range(start, end)) as batches:
+    with open(log_path, "a") as log, Prefetcher(lambda s: batch_on_device(stream.batch(s)), range(start, end)) as batches:
         bar = tqdm(batches, initial=start, total=end, disable=not spec.progress, desc=detector.name)
         for step, batch in bar:
             step_fn = step_fns[batch["window"] % len(step_fns)]

@@ -59,6 +59,17 @@ def train_step_fn(detector, tx: optax.GradientTransformation, extra_inputs: tupl
     return train_step
 
 
+def batch_on_device(batch: dict) -> dict:
+    """`batch` with its 'inputs' and 'targets' copied into XLA buffers, the copies finished.
+    The prefetch worker calls it, so the copy overlaps the running step. It also matters with
+    async dispatch off (core/host_memory.py): XLA runs a call inline on the calling thread only
+    when all of its inputs are ready. A numpy array that is not 64-byte aligned is copied
+    asynchronously, and then the whole step would run on a pool thread, whose heap maps its
+    temporary buffer afresh on every call."""
+    moved = jax.device_put({"inputs": batch["inputs"], "targets": batch["targets"]})
+    return {**batch, **jax.block_until_ready(moved)}
+
+
 def make_train_step(detector, tx: optax.GradientTransformation):
     """The jitted step (state, batch) -> (state, metrics), state donated."""
     return jax.jit(train_step_fn(detector, tx), donate_argnums=0)

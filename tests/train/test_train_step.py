@@ -7,7 +7,7 @@ from dsfec_jax.models.dsfec.targets import detector_targets
 from dsfec_jax.models.dsfec.net import HEAD_NAMES
 from dsfec_jax.models.dsfec.loss import LossConfig, detection_loss, sigmoid_focal_loss, smooth_l1
 from dsfec_jax.train.schedules import get_schedule, learning_rate, optimizer
-from dsfec_jax.train.step import init_state, make_train_step
+from dsfec_jax.train.step import batch_on_device, init_state, make_train_step
 from conftest import random_variables, tiny
 from builders import toy_frame
 
@@ -58,3 +58,22 @@ def test_paper_schedule_warms_up_then_decays():
     lr = learning_rate(s, 9000)
     assert float(lr(0)) < float(lr(200)) < float(lr(400)) == pytest.approx(0.00348)
     assert float(lr(7000)) == pytest.approx(0.000348) and float(lr(8500)) == pytest.approx(0.0000348)
+
+
+def test_batch_on_device_moves_inputs_and_targets_and_keeps_the_rest():
+    """The prefetch worker hands the step XLA buffers whose copies are done (so that the step can
+    run inline, core/host_memory.py), holding the same values, and leaves the other fields alone."""
+    rng = np.random.default_rng(0)
+    raw = np.zeros(8 * 3 + 1, np.float32)[1:].reshape(8, 3)  # offset by 4 bytes: never 64-byte aligned
+    raw[:] = rng.normal(size=(8, 3))
+    batch = {"inputs": {"pillars": raw}, "targets": {"car": {"heat": np.arange(6.0).reshape(2, 3)}},
+             "window": 3, "stats": {"dropped": 1}}
+    moved = batch_on_device(batch)
+    for path in (("inputs", "pillars"), ("targets", "car", "heat")):
+        before, after = batch, moved
+        for key in path:
+            before, after = before[key], after[key]
+        assert isinstance(after, jax.Array) and after.is_ready()
+        np.testing.assert_array_equal(np.asarray(after), before)
+    assert moved["window"] == 3 and moved["stats"] is batch["stats"]
+    assert isinstance(batch["inputs"]["pillars"], np.ndarray)  # the caller's batch is not changed
