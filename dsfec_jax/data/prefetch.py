@@ -1,10 +1,10 @@
 """Batches computed ahead of the training step by a background thread, yielded in step order.
 
-The train step is dispatched asynchronously (JAX returns before the computation ends), so the
-host is free while the step runs; a worker thread uses that time to build the next batches
-(augmentation, pillarization, targets) into a bounded queue. numpy releases the GIL in its
-array kernels (https://numpy.org/doc/stable/reference/thread_safety.html), and XLA runs the
-step on its own threads, so one Python thread is enough to overlap the two. The worker shares
+While the train step runs (on XLA's threads, whether JAX dispatched it asynchronously or, as the
+project's commands do, runs it inline on the main thread: core/host_memory.py), a worker thread
+builds the next batches (augmentation, pillarization, targets) into a bounded queue. numpy
+releases the GIL in its array kernels (https://numpy.org/doc/stable/reference/thread_safety.html),
+and jaxlib releases it while XLA runs, so one Python thread is enough to overlap the two. The worker shares
 the process's CPUs with XLA (core.threads pins every thread of the process), so on a machine
 whose cores the step keeps busy it hides only what the step leaves idle.
 

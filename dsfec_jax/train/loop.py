@@ -12,10 +12,13 @@ A kill at any point leaves a resumable directory: checkpoints are written as one
 dsfec_jax.core.checkpoint; an incomplete one is skipped for the previous), a torn last metrics line is
 dropped.
 
-The host does not wait for each step: batches are built ahead by a background worker
-(dsfec_jax.data.prefetch), and the losses stay on the device until a log, evaluation or
-checkpoint step reads them together (train.loss_watch), which is also where a non-finite loss
-stops the run, before any diverged state is evaluated or saved.
+The host never stalls the step: batches are built ahead by a background worker
+(dsfec_jax.data.prefetch) and handed over as ready XLA buffers (train.step.batch_on_device), and
+the losses stay on the device until a log, evaluation or checkpoint step reads them together
+(train.loss_watch), which is also where a non-finite loss stops the run, before any diverged
+state is evaluated or saved. Under JAX's default async dispatch the loop queues the next step
+without waiting; the project's commands run each step inline (core/host_memory.py), which keeps
+XLA's temporary buffer between steps.
 """
 
 from __future__ import annotations
