@@ -28,4 +28,5 @@ def xla_threads() -> int:
 
 def environment() -> dict:
     return {"cpu": cpu_model(), "cores": os.cpu_count(), "threads": xla_threads(),
-            "cpu_affinity": threads.available_cpus(), "glibc_hugetlb": host_memory.active(), "keeps_xla_buffers": host_memory.keeps_buffers(), "versions": versions()}
+            "cpu_affinity": threads.available_cpus(), "glibc_hugetlb": host_memory.active(),
+            "keeps_xla_buffers": host_memory.keeps_buffers(), "versions": versions()}

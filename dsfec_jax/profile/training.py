@@ -391,7 +391,8 @@ def measure(name: str, settings: Settings, compare: dict | None = None, threads:
                   "interleaved_times_ms": {k: summary(ms) for k, ms in samples["sgemm"].items()}},
         "configs": results, "comparison": comparison(results) if compare else None,
         "environment": {"cpu": cpu_model(), "threads_asked": threads, "xla_threads": xla_threads(),
-                        "cpu_affinity": thread_control.available_cpus(), "glibc_hugetlb": host_memory.active(), "keeps_xla_buffers": host_memory.keeps_buffers(),
+                        "cpu_affinity": thread_control.available_cpus(), "glibc_hugetlb": host_memory.active(),
+                        "keeps_xla_buffers": host_memory.keeps_buffers(),
                         "versions": versions(("jax", "jaxlib", "flax", "numpy", "optax", "dsfec_jax"))},
     }
 

@@ -220,7 +220,11 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     scores = None
     losses = LossWatch()
     t0 = time.perf_counter()
-    with open(log_path, "a") as log, Prefetcher(lambda s: batch_on_device(stream.batch(s)), range(start, end)) as batches:
+
+    def ready_batch(step: int) -> dict:  # built, and copied into XLA buffers, in the worker
+        return batch_on_device(stream.batch(step))
+
+    with open(log_path, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches:
         bar = tqdm(batches, initial=start, total=end, disable=not spec.progress, desc=detector.name)
         for step, batch in bar:
             step_fn = step_fns[batch["window"] % len(step_fns)]

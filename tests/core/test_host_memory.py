@@ -15,6 +15,7 @@ GLIBC = (2, 36)
 
 KEEP = ":".join(f"{k}={v}" for k, v in hm.KEEP_BUFFERS.items())
 ALL = f"{hm.SETTING}:{KEEP}"
+TRIM = f"glibc.malloc.trim_threshold={hm.KEEP_BUFFERS['glibc.malloc.trim_threshold']}"
 
 
 @pytest.mark.parametrize("env,glibc,thp,expected", [
@@ -23,8 +24,7 @@ ALL = f"{hm.SETTING}:{KEEP}"
     ({"GLIBC_TUNABLES": "glibc.malloc.arena_max=2"}, GLIBC, "madvise", "glibc.malloc.arena_max=2:" + ALL),
     # the user's own choices stand; only what they left out is added
     ({"GLIBC_TUNABLES": "glibc.malloc.hugetlb=0"}, GLIBC, "madvise", "glibc.malloc.hugetlb=0:" + KEEP),
-    ({"GLIBC_TUNABLES": "glibc.malloc.mmap_max=4"}, GLIBC, "madvise",
-     f"glibc.malloc.mmap_max=4:{hm.SETTING}:glibc.malloc.trim_threshold={hm.KEEP_BUFFERS['glibc.malloc.trim_threshold']}"),
+    ({"GLIBC_TUNABLES": "glibc.malloc.mmap_max=4"}, GLIBC, "madvise", f"glibc.malloc.mmap_max=4:{hm.SETTING}:{TRIM}"),
     ({"GLIBC_TUNABLES": ALL}, GLIBC, "madvise", None),  # already relaunched: no loop
     ({"GLIBC_TUNABLES": KEEP}, GLIBC, "never", None),  # already relaunched without THP
     ({hm.OPT_OUT: "0"}, GLIBC, "madvise", None),

@@ -64,7 +64,7 @@ def test_batch_on_device_moves_inputs_and_targets_and_keeps_the_rest():
     """The prefetch worker hands the step XLA buffers whose copies are done (so that the step can
     run inline, core/host_memory.py), holding the same values, and leaves the other fields alone."""
     rng = np.random.default_rng(0)
-    raw = np.zeros(8 * 3 + 1, np.float32)[1:].reshape(8, 3)  # offset by 4 bytes: never 64-byte aligned
+    raw = np.zeros(8 * 3 + 1, np.float32)[1:].reshape(8, 3)  # 4 bytes past an allocation: not 64-byte aligned
     raw[:] = rng.normal(size=(8, 3))
     batch = {"inputs": {"pillars": raw}, "targets": {"car": {"heat": np.arange(6.0).reshape(2, 3)}},
              "window": 3, "stats": {"dropped": 1}}
