@@ -24,7 +24,8 @@ def parser(prog: str, doc: str, base: str = "dsfec_l", strategy: str = "train") 
     p.add_argument("--data", default=None, help="synthetic | synthetic4d | vod:PATH | tj4d:PATH | nuscenes:DATAROOT "
                    "(default: the profile's benchmark, synthetic4d for RadarNeXt bases)")
     p.add_argument("--out", default=None, help="RUN_DIR (default runs/search/<name>); re-running resumes it")
-    p.add_argument("--seeds", type=int, default=1, help="repeat each candidate with this many seeds")
+    p.add_argument("--seeds", type=int, default=None,
+                   help="repeat each candidate with this many seeds (default 1; --strategy oneshot: the profile's)")
     p.add_argument("--strategy", default=strategy, choices=("train", "oneshot"),
                    help=f"train every candidate, or one weight-sharing supernet over a depth axis (default {strategy})")
     p.add_argument("--supernet-steps", type=int, default=None,
@@ -43,6 +44,16 @@ def parse(p: argparse.ArgumentParser, argv=None) -> argparse.Namespace:
     return args
 
 
+def seed_count(seeds: int | None, strategy: str, recipe) -> int:
+    """--seeds, or its default: 1, or a one-shot search the profile's `oneshot_seeds` (a seed there
+    is one supernet, not one training per candidate, so a profile can afford several)."""
+    if seeds is None:
+        seeds = recipe.oneshot_seeds if strategy == "oneshot" else 1
+    if seeds < 1:
+        raise SearchSpaceError(f"--seeds {seeds}: expected a seed count >= 1")
+    return seeds
+
+
 def run_search(args, name: str, candidates_fn, title: str, base_label: str | None) -> int:
     """Validate every candidate first, then run the missing trials and write the reports."""
     try:
@@ -58,6 +69,7 @@ def run_search(args, name: str, candidates_fn, title: str, base_label: str | Non
         elif args.supernet_steps is not None:
             raise SearchSpaceError("--supernet-steps is for --strategy oneshot (--strategy train trains each "
                                    "candidate for the profile's schedule)")
+        args.seeds = seed_count(args.seeds, args.strategy, recipe)
     except (SearchSpaceError, KeyError) as err:
         sys.exit(str(err).strip("'\""))
     args.data = args.data or recipe.data

@@ -2,10 +2,10 @@
 
 `smoke` checks the whole pipeline in about a minute per trial; its numbers mean nothing. `quick`
 fits a sweep into ~15 minutes on a 2-core CPU: for DSFEC a 32 m x 32 m grid in front of the
-sensor (64 x 64 cells), 150 steps of batch 4 per trial (480 for a whole one-shot supernet, `--supernet-steps` to change it) and
-100 validation frames, depth sweeps starting from the base's shipped weights (search.inherit);
-its mAP differences below ~1.5 points are noise (README, "What the quick stage-2 sweep
-measures"). For RadarNeXt: the synthetic 4D (View-of-Delft-like) benchmark, RadarNeXt's schedule,
+sensor (64 x 64 cells), 150 steps of batch 4 per trial (a one-shot sweep: three seeds of a
+480-step supernet, `--seeds` and `--supernet-steps` to change them) and 100 validation frames,
+depth sweeps starting from the base's shipped weights (search.inherit); a single seed's mAP
+differences below ~1.5 points are noise (README, "What the quick stage-2 sweep measures"). For RadarNeXt: the synthetic 4D (View-of-Delft-like) benchmark, RadarNeXt's schedule,
 96-cell windows of the 0.16 m VoD grid, validation on the whole grid with the VoD 3D AP. `paper`
 trains on the whole grid with the paper's schedule. Sizes and latency are always profiled on the
 model's own (full) grid, so the cost columns are comparable with the paper whatever the recipe.
@@ -34,6 +34,7 @@ class Recipe:
     supernet_steps: int | None  # --strategy oneshot: steps of the one supernet, shared by all candidates
     light_profile: bool        # analytic sizes + whole-network latency only (one compile per candidate)
     warm_start: bool = False   # depth sweeps start from the base's shipped weights (search.inherit)
+    oneshot_seeds: int = 1     # --strategy oneshot without --seeds: supernets (seeds) per search
     data: str = "synthetic"    # the source a search reads when --data is not given
 
     def model_overrides(self) -> dict:

@@ -18,7 +18,7 @@ from pathlib import Path
 from dsfec_jax import zoo
 from dsfec_jax.core import atomic
 
-from . import significance
+from . import seed_agreement, significance
 from .journal import Journal
 
 def protocol(records: list[dict]):
@@ -224,6 +224,10 @@ def write_reports(run_dir: str | Path) -> dict:
         sig, note = None, f"\nNo bootstrap intervals: {err}\n"
     else:
         note = ""
+    score = headline(records)
+    seeds = seed_agreement.agreement(records, score[0])
+    if seeds is not None:
+        note += "\n" + seed_agreement.summary(seeds, score[1]) + "\n"
     files = ["report.md", "report.csv", "records.json", "map_vs_gflops.png", "map_vs_latency.png"]
     atomic.write_text(run_dir / "report.md",
                       markdown(table, meta.get("base_label"), title, columns, sig) + note
@@ -236,10 +240,14 @@ def write_reports(run_dir: str | Path) -> dict:
         files.append("significance.json")
     else:  # an earlier report's intervals no longer describe this journal
         (run_dir / "significance.json").unlink(missing_ok=True)
-    score = headline(records)
+    if seeds is not None:
+        atomic.write_json(run_dir / "seed_agreement.json", seeds)
+        files.append("seed_agreement.json")
+    else:
+        (run_dir / "seed_agreement.json").unlink(missing_ok=True)
     plot(table, "gflops", run_dir / "map_vs_gflops.png", title, score)
     plot(table, "latency_ms", run_dir / "map_vs_latency.png", title, score)
-    return {"rows": table, "files": files, "significance": sig}
+    return {"rows": table, "files": files, "significance": sig, "seed_agreement": seeds}
 
 
 def main(argv=None) -> int:

@@ -57,9 +57,10 @@ class SearchRecipe:
     """How much a search trial of this family trains and where it is measured (search.recipes
     turns it into a Recipe). `schedule` names a train.schedules preset; `schedule_changes`
     override its fields; `grid` None keeps the model's own grid; `window` None trains on the
-    whole (recipe) grid; `supernet_steps` None means the schedule's length. `max_pillars`, `grid`
-    and `window` are the point families' (None for a range-Doppler family: frames are then RD
-    samples)."""
+    whole (recipe) grid; `supernet_steps` None means the schedule's length; `oneshot_seeds` is
+    how many supernets (seeds) a one-shot search trains when `--seeds` is not given.
+    `max_pillars`, `grid` and `window` are the point families' (None for a range-Doppler family:
+    frames are then RD samples)."""
 
     schedule: str
     schedule_changes: Mapping[str, Any]
@@ -72,6 +73,7 @@ class SearchRecipe:
     supernet_steps: int | None
     light_profile: bool
     warm_start: bool = False
+    oneshot_seeds: int = 1
 
 
 # point clouds (pillarized); range-Doppler maps (image-like, 2D boxes in map cells); RGB camera

@@ -78,7 +78,7 @@ RECIPES = {
     "smoke": SearchRecipe("quick", {"steps": 2, "batch_size": 2, "warmup_steps": 1}, 4, 2, SMOKE_GRID, 64, None, 1,
                           supernet_steps=4, light_profile=True),
     "quick": SearchRecipe("quick", {"steps": 150, "batch_size": 4, "warmup_steps": 15}, 400, 100, NEAR_GRID, 512,
-                          None, 20, supernet_steps=480, light_profile=True, warm_start=True),
+                          None, 20, supernet_steps=480, light_profile=True, warm_start=True, oneshot_seeds=3),
     "paper": SearchRecipe("paper", {}, 4800, 500, None, 2048, None, 20, supernet_steps=None, light_profile=False),
 }
 
