@@ -71,6 +71,8 @@ def summary(result: dict, title: str) -> str:
     parts = [f"{r['k']} vs {r['k']} seed{'s' if r['k'] > 1 else ''}: tau {r['tau_mean']:.2f} "
              f"({r['tau_min']:.2f} to {r['tau_max']:.2f} over {r['splits']} splits), same top candidate in "
              f"{100 * r['same_top']:.0f} %" for r in result["by_k"] if r["tau_mean"] is not None]
+    n = len(result["seeds"])
     return (f"Seed agreement ({title}; seeds {', '.join(map(str, result['seeds']))} split into two disjoint "
             f"groups, candidates ranked by each group's mean, Kendall tau between the two rankings): "
-            + "; ".join(parts) + ".")
+            + "; ".join(parts) + f". (How well this {n}-seed table itself would reproduce takes {2 * n} seeds "
+            "to measure: `--seeds` more on the same RUN_DIR resumes it.)")

@@ -68,6 +68,7 @@ def test_report_prints_and_saves_the_agreement_with_two_seeds_or_more(tmp_path):
     assert "Seed agreement (Car mAP; seeds 0, 1, 2, 3 split into two disjoint groups" in md
     assert "1 vs 1 seed: tau 1.00 (1.00 to 1.00 over 6 splits), same top candidate in 100 %" in md
     assert "2 vs 2 seeds: tau 1.00" in md and "seed_agreement.json" in out["files"]
+    assert "How well this 4-seed table itself would reproduce takes 8 seeds to measure" in md
     assert out["seed_agreement"]["by_k"][1]["splits"] == 3
     # one seed: no line, and a stale file from an earlier report goes
     single = tmp_path / "single"
