@@ -24,8 +24,8 @@ def parser(prog: str, doc: str, base: str = "dsfec_l", strategy: str = "train") 
     p.add_argument("--data", default=None, help="synthetic | synthetic4d | vod:PATH | tj4d:PATH | nuscenes:DATAROOT "
                    "(default: the profile's benchmark, synthetic4d for RadarNeXt bases)")
     p.add_argument("--out", default=None, help="RUN_DIR (default runs/search/<name>); re-running resumes it")
-    p.add_argument("--seeds", type=int, default=None,
-                   help="repeat each candidate with this many seeds (default 1; --strategy oneshot: the profile's)")
+    p.add_argument("--seeds", type=int, default=None, help="repeat each candidate with this many seeds "
+                   "(default 1; --strategy oneshot: the profile's)")
     p.add_argument("--strategy", default=strategy, choices=("train", "oneshot"),
                    help=f"train every candidate, or one weight-sharing supernet over a depth axis (default {strategy})")
     p.add_argument("--supernet-steps", type=int, default=None,

@@ -30,7 +30,8 @@ def seed_scores(records: list[dict], key: str) -> tuple[list[str], list[int], np
             by_label[r["label"]][int(r.get("seed", 0))] = float(value)
     seeds = sorted(set.intersection(*(set(v) for v in by_label.values()))) if by_label else []
     labels = list(by_label)
-    return labels, seeds, np.array([[by_label[label][s] for s in seeds] for label in labels]).reshape(len(labels), len(seeds))
+    values = np.array([[by_label[label][s] for s in seeds] for label in labels])
+    return labels, seeds, values.reshape(len(labels), len(seeds))  # (n, 0), not (n,), with no shared seed
 
 
 def splits(n_seeds: int, k: int, rng_seed: int = 0) -> list[tuple[tuple[int, ...], tuple[int, ...]]]:

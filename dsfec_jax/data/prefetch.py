@@ -4,9 +4,9 @@ While the train step runs (on XLA's threads, whether JAX dispatched it asynchron
 project's commands do, runs it inline on the main thread: core/host_memory.py), a worker thread
 builds the next batches (augmentation, pillarization, targets) into a bounded queue. numpy
 releases the GIL in its array kernels (https://numpy.org/doc/stable/reference/thread_safety.html),
-and jaxlib releases it while XLA runs, so one Python thread is enough to overlap the two. The worker shares
-the process's CPUs with XLA (core.threads pins every thread of the process), so on a machine
-whose cores the step keeps busy it hides only what the step leaves idle.
+and jaxlib releases it while XLA runs, so one Python thread is enough to overlap the two. The
+worker shares the process's CPUs with XLA (core.threads pins every thread of the process), so on
+a machine whose cores the step keeps busy it hides only what the step leaves idle.
 
 The worker only calls `make(step)` for the steps asked for, in order: a batch stays whatever
 `make` returns for its step (BatchStream.batch is a pure function of (seed, step)), so
