@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from . import depthwise_grad_cpu
+from . import depthwise_grad_cpu, winograd
 from .batch_norm import BatchNorm
 from .kernels import KERNELS, Kernels, check_kernels  # noqa: F401  (re-exported)
 
@@ -75,14 +75,17 @@ def plain_conv(x_BxHxWxC, w_KxKxIxO, pads=None):
 
 @functools.partial(jax.custom_vjp, nondiff_argnums=(2,))
 def fast_conv(x_BxHxWxC, w_KxKxIxO, pads=None):
-    """`plain_conv` with a hand-written kernel gradient of the same value.
+    """`plain_conv` (the same forward, bit for bit) with a hand-written backward of the same value.
 
     XLA's CPU backend computes a conv's kernel gradient as a convolution whose window is the whole
     image (3x3 outputs, 96x96 taps): single-threaded and ~4x the forward's time, the largest op of
-    a DSFEC head's backward pass. Here it is K*K matrix products per image, g^T (O x HW) times the
-    image's tap view (HW x I), summed over images: 2.6x faster at 1 thread and 2.8x at 2 on a
-    24-channel head conv of a DSFEC-S training batch (96->96: 1.7x / 2.8x). The input gradient
-    stays XLA's (a plain conv of the output gradient).
+    a DSFEC head's backward pass. Here it is, for 3x3 kernels from `WINOGRAD_MIN_CHANNELS` on,
+    Winograd's F(3x3, 4x4) (winograd.py: 36 batched products; 2.4x faster than the tap products
+    below on a 96->96 head conv of DSFEC-L), and otherwise K*K matrix products per image, g^T
+    (O x HW) times the image's tap view (HW x I), summed over images: 2.6x faster than XLA's at 1
+    thread and 2.8x at 2 on a 24-channel head conv of a DSFEC-S training batch. The input
+    gradient is Winograd's F(4x4, 3x3) on large wide images, otherwise XLA's (a plain conv of the
+    output gradient).
     """
     return plain_conv(x_BxHxWxC, w_KxKxIxO, pads)
 
@@ -93,8 +96,33 @@ def _fast_conv_fwd(x, w, pads):
 
 def _fast_conv_bwd(pads, residuals, g_BxHxWxO):
     x, w = residuals
-    dx = jax.vjp(lambda x_: plain_conv(x_, w, pads), x)[1](g_BxHxWxO)[0]
-    return dx, conv_kernel_grad(x, g_BxHxWxO, w.shape[0], pads)
+    k, cin, cout = w.shape[0], w.shape[2], w.shape[3]
+    full_pads = explicit_pads(x.shape, k, pads)
+    winograd_fits = (k == winograd.TAPS and min(cin, cout) >= WINOGRAD_MIN_CHANNELS
+                     and max(max(side) for side in full_pads) < winograd.TAPS)
+    if winograd_fits and g_BxHxWxO.shape[1] * g_BxHxWxO.shape[2] >= WINOGRAD_INPUT_GRAD_MIN_PIXELS:
+        dx = winograd.conv3x3_input_grad(g_BxHxWxO, w, full_pads)
+    else:
+        dx = jax.vjp(lambda x_: plain_conv(x_, w, pads), x)[1](g_BxHxWxO)[0]
+    if winograd_fits:
+        return dx, winograd.conv3x3_kernel_grad(x, g_BxHxWxO, full_pads)
+    return dx, conv_kernel_grad(x, g_BxHxWxO, k, pads)
+
+
+# Where Winograd's F(4x4, 3x3) beats XLA's 3x3 backward (winograd.py; batch 8, 2 threads, each
+# part alone). Kernel gradient: 1.1-2.9x faster from 32 channels on both sides at 12x12 to 96x96,
+# but at 24 channels and 96x96 (DSFEC-S's heads) 0.9x. Input gradient: 1.2-1.7x faster from 48x48
+# on, 0.3-0.9x below (the tile transforms outweigh the product). In the whole step, DSFEC-L's
+# fwd + bwd went from 678 to 624 ms and RadarNeXt-FPN's from 398 to 328 ms.
+WINOGRAD_MIN_CHANNELS = 32
+WINOGRAD_INPUT_GRAD_MIN_PIXELS = 48 * 48
+
+
+def explicit_pads(x_shape, k: int, pads=None) -> tuple[tuple[int, int], tuple[int, int]]:
+    """`pads` of a stride-1 conv as ((top, bottom), (left, right)); None is TF 'SAME'."""
+    if pads is None:
+        return same_pads(x_shape[1], k, 1), same_pads(x_shape[2], k, 1)
+    return tuple(pads[0]), tuple(pads[1])
 
 
 # Below this many output pixels per image, one product per tap over the whole batch beats one per

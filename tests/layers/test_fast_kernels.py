@@ -95,12 +95,23 @@ def test_depthwise_kernel_gradient_of_other_dtypes_stays_in_xla():
     assert "dsfec_depthwise_kernel_grad" not in lowered
 
 
-@pytest.fixture(params=["per_image", "whole_batch"])
+def force_winograd(monkeypatch, on: bool) -> None:
+    """The thresholds that pick `fast_conv`'s backward: Winograd's for every 3x3 (both gradients)
+    or for none, whatever the channels and the image size."""
+    from dsfec_jax.layers import conv
+
+    monkeypatch.setattr(conv, "WINOGRAD_MIN_CHANNELS", 1 if on else 10**9)
+    monkeypatch.setattr(conv, "WINOGRAD_INPUT_GRAD_MIN_PIXELS", 0 if on else 10**9)
+
+
+@pytest.fixture(params=["per_image", "whole_batch", "winograd"])
 def kernel_grad_path(request, monkeypatch):
-    """Both forms of `conv_kernel_grad`: the threshold picks one for any image size."""
+    """Every form of the dense conv's backward: the thresholds pick one for any image size and
+    channel count (Winograd's: 3x3 kernels only, the others take the tap products)."""
     from dsfec_jax.layers import conv
 
     monkeypatch.setattr(conv, "PER_IMAGE_KERNEL_GRAD_MIN_PIXELS", 0 if request.param == "per_image" else 10**9)
+    force_winograd(monkeypatch, request.param == "winograd")
     return request.param
 
 
@@ -199,10 +210,17 @@ def test_an_unknown_kernels_value_names_the_field():
         tiny("dsfec_s", kernels="quick")
 
 
-@pytest.mark.parametrize("name", ["dsfec_s"])  # the Baseline's residual path: the per-layer tests (43 s saved)
-def test_whole_model_training_gradients_equal(name, float64):
+@pytest.mark.parametrize("name,winograd", [("dsfec_s", False), ("dsfec_s", True)])  # the Baseline: per-layer tests
+def test_whole_model_training_gradients_equal(name, winograd, float64, monkeypatch):
     """The train-mode loss of a whole small network (FEC or PointPillars encoder, DSConv or
-    residual backbone, deconv neck, heads) has the same gradients with either formulation."""
+    residual backbone, deconv neck, heads) has the same gradients with either formulation; with
+    `winograd`, every 3x3 stride-1 dense conv's backward is Winograd's (a tiny model's few
+    channels would leave it to the tap products)."""
+    from dsfec_jax.layers import winograd as winograd_module
+
+    force_winograd(monkeypatch, winograd)
+    original, calls = winograd_module.conv3x3_kernel_grad, []
+    monkeypatch.setattr(winograd_module, "conv3x3_kernel_grad", lambda *a: calls.append(a) or original(*a))
     batch = as_float64(toy_batch(tiny(name)))
     plain, fast = tiny(name, kernels="plain"), tiny(name, kernels="fast")
     # random weights from eval_shape: `init` would compile the whole forward once more (~10 s)
@@ -216,6 +234,7 @@ def test_whole_model_training_gradients_equal(name, float64):
         return jax.jit(jax.value_and_grad(loss))(variables["params"])
 
     (plain_loss, plain_g), (fast_loss, fast_g) = loss_and_grads(plain), loss_and_grads(fast)
+    assert bool(calls) == winograd  # the form under test is the one that ran
     assert jax.tree.leaves(fast_g)[0].dtype == jnp.float64
     assert float(fast_loss) == pytest.approx(float(plain_loss), rel=1e-10)
     assert rel_err(fast_g, plain_g) < RTOL
