@@ -161,13 +161,16 @@ def test_pointwise_conv_gradient_equals_autodiff(shape):
 
 @pytest.mark.parametrize("kernel", [1, 2, 3, 4])
 @pytest.mark.parametrize("stride", [1, 2, 3])
-@pytest.mark.parametrize("fast_grad", [False, True])
-def test_subpixel_upsampling_equals_conv_transpose(kernel, stride, fast_grad):
+@pytest.mark.parametrize("fast_grad", [False, True, "winograd"])
+def test_subpixel_upsampling_equals_conv_transpose(kernel, stride, fast_grad, monkeypatch):
+    """"winograd": the dense conv's backward is Winograd's wherever its kernel is 3x3 (kernel 3
+    at stride 1, kernel 4 at stride 2: the phases' taps make a 3x3 window)."""
+    force_winograd(monkeypatch, fast_grad == "winograd")
     x = jax.random.normal(jax.random.key(kernel), (2, 5, 7, 3))
     w = jax.random.normal(jax.random.key(stride), (kernel, kernel, 3, 4))
     plain = lambda x, w: lax.conv_transpose(x, w, (stride, stride), "SAME", dimension_numbers=DIMS)  # noqa: E731
     plain_y, plain_g = grads(plain, x, w)
-    fast_y, fast_g = grads(lambda x, w: subpixel_conv_transpose(x, w, stride, fast_grad), x, w)
+    fast_y, fast_g = grads(lambda x, w: subpixel_conv_transpose(x, w, stride, bool(fast_grad)), x, w)
     assert fast_y.shape == plain_y.shape == (2, 5 * stride, 7 * stride, 4)
     np.testing.assert_allclose(fast_y, plain_y, rtol=1e-5, atol=1e-5)
     assert rel_err(fast_g, plain_g) < RTOL
