@@ -109,11 +109,12 @@ def _fast_conv_bwd(pads, residuals, g_BxHxWxO):
     return dx, conv_kernel_grad(x, g_BxHxWxO, k, pads)
 
 
-# Where Winograd's F(4x4, 3x3) beats XLA's 3x3 backward (winograd.py; batch 8, 2 threads, each
-# part alone). Kernel gradient: 1.1-2.9x faster from 32 channels on both sides at 12x12 to 96x96,
-# but at 24 channels and 96x96 (DSFEC-S's heads) 0.9x. Input gradient: 1.2-1.7x faster from 48x48
-# on, 0.3-0.9x below (the tile transforms outweigh the product). In the whole step, DSFEC-L's
-# fwd + bwd went from 678 to 624 ms and RadarNeXt-FPN's from 398 to 328 ms.
+# Where Winograd's F(4x4, 3x3) beats the other 3x3 backward forms: `python -m
+# dsfec_jax.profile.conv_backward` (batch 8, 2 threads, each part alone). Kernel gradient: 1.0-2.8x
+# from 32 channels on both sides at 12x12 to 96x96; at 24 channels and 96x96 (DSFEC-S's heads)
+# 0.9-1.03x, so those keep the tap products. Input gradient: 1.1-1.9x from 48x48 and 32 channels
+# on, 0.3-0.8x below (the tile transforms outweigh the product). In the whole step (README),
+# DSFEC-L's fwd + bwd went from 681 to 632 ms and RadarNeXt-FPN's from 390 to 345 ms.
 WINOGRAD_MIN_CHANNELS = 32
 WINOGRAD_INPUT_GRAD_MIN_PIXELS = 48 * 48
 
