@@ -80,7 +80,7 @@ def fast_conv(x_BxHxWxC, w_KxKxIxO, pads=None):
     XLA's CPU backend computes a conv's kernel gradient as a convolution whose window is the whole
     image (3x3 outputs, 96x96 taps): single-threaded and ~4x the forward's time, the largest op of
     a DSFEC head's backward pass. Here it is, for 3x3 kernels from `WINOGRAD_MIN_CHANNELS` on,
-    Winograd's F(3x3, 4x4) (winograd.py: 36 batched products; 2.4x faster than the tap products
+    Winograd's F(3x3, 4x4) (winograd.py: 36 batched products; 2-2.4x faster than the tap products
     below on a 96->96 head conv of DSFEC-L), and otherwise K*K matrix products per image, g^T
     (O x HW) times the image's tap view (HW x I), summed over images: 2.6x faster than XLA's at 1
     thread and 2.8x at 2 on a 24-channel head conv of a DSFEC-S training batch. The input
@@ -98,8 +98,9 @@ def _fast_conv_bwd(pads, residuals, g_BxHxWxO):
     x, w = residuals
     k, cin, cout = w.shape[0], w.shape[2], w.shape[3]
     full_pads = explicit_pads(x.shape, k, pads)
+    flat_pads = [p for side in full_pads for p in side]  # the tiles need 0 <= pad < 3
     winograd_fits = (k == winograd.TAPS and min(cin, cout) >= WINOGRAD_MIN_CHANNELS
-                     and max(max(side) for side in full_pads) < winograd.TAPS)
+                     and 0 <= min(flat_pads) and max(flat_pads) < winograd.TAPS)
     if winograd_fits and g_BxHxWxO.shape[1] * g_BxHxWxO.shape[2] >= WINOGRAD_INPUT_GRAD_MIN_PIXELS:
         dx = winograd.conv3x3_input_grad(g_BxHxWxO, w, full_pads)
     else:
