@@ -29,6 +29,17 @@ def non_negative_int(text: str) -> int:
     return value
 
 
+def positive_int_list(text: str) -> list[int]:
+    """'12,24' -> [12, 24]: a comma-separated list of counts, each at least 1."""
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        values = []
+    if not values or min(values) < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated integers >= 1, e.g. 24,48")
+    return values
+
+
 def _int(text: str) -> int:
     try:
         return int(text)

@@ -138,10 +138,10 @@ def conv_kernel_grad(x_BxHxWxI, g_BxHoxWoxO, k: int, pads=None):
     times g: (K, K, I, O). Large images one at a time, so their tap views stay in cache; small
     ones all at once, so each product has enough rows to keep the cores busy. `pads`: as in
     `plain_conv` (None: 'SAME')."""
-    _, h, w, cin = x_BxHxWxI.shape
+    cin = x_BxHxWxI.shape[-1]
     _, ho, wo, cout = g_BxHoxWoxO.shape
-    ph, pw = (same_pads(h, k, 1), same_pads(w, k, 1)) if pads is None else pads
-    xp = jnp.pad(x_BxHxWxI, ((0, 0), tuple(ph), tuple(pw), (0, 0)))
+    ph, pw = explicit_pads(x_BxHxWxI.shape, k, pads)
+    xp = jnp.pad(x_BxHxWxI, ((0, 0), ph, pw, (0, 0)))
     if ho * wo < PER_IMAGE_KERNEL_GRAD_MIN_PIXELS:
         taps = [jnp.einsum("bhwi,bhwo->io", xp[:, i:i + ho, j:j + wo], g_BxHoxWoxO) for i in range(k) for j in range(k)]
         return jnp.stack(taps).reshape(k, k, cin, cout)

@@ -41,10 +41,8 @@ def conv3x3(x_BxHxWxI, w_3x3xIxO, pads: Pads):
     cout = w_3x3xIxO.shape[-1]
     (top, bottom), (left, right) = pads
     ho, wo = h + top + bottom - TAPS + 1, w + left + right - TAPS + 1
-    nh, nw = -(-ho // TILE), -(-wo // TILE)
-    # round the output up to whole tiles; the extra rows read zeros and are cropped off
-    xp = jnp.pad(x_BxHxWxI, ((0, 0), (top, bottom + TILE * nh - ho), (left, right + TILE * nw - wo), (0, 0)))
-    u = _tiles_2d(xp, B_T, SPAN, nh, nw).reshape(SPAN * SPAN, b * nh * nw, cin)
+    # the output rounded up to whole tiles; the extra rows read zeros and are cropped off
+    u, nh, nw = _input_tiles(x_BxHxWxI, pads, ho, wo)
     gm = jnp.asarray(G, x_BxHxWxI.dtype)
     v = jnp.einsum("ua,abio,vb->uvio", gm, w_3x3xIxO, gm).reshape(SPAN * SPAN, cin, cout)
     m = jnp.einsum("uti,uio->uto", u, v).reshape(SPAN, SPAN, b, nh, nw, cout)
@@ -62,21 +60,27 @@ def conv3x3_input_grad(g_BxHoxWoxO, w_3x3xIxO, pads: Pads):
 
 def conv3x3_kernel_grad(x_BxHxWxI, g_BxHoxWoxO, pads: Pads):
     """d w of `conv3x3(x, w, pads)`: sum over images and pixels of tap (i, j)'s view of the padded
-    input times g, by F(3x3, 4x4): y = G^T [(A^T' h) * (B^T d)] in one dimension, where h is a
+    input times g, by F(3x3, 4x4): y = G^T [(A h) * (B^T d)] in one dimension, where h is a
     4-pixel tile of g and d the 6 input pixels it meets."""
-    b, _, _, cin = x_BxHxWxI.shape
+    cin = x_BxHxWxI.shape[-1]
     _, ho, wo, cout = g_BxHoxWoxO.shape
-    (top, bottom), (left, right) = pads
-    nh, nw = -(-ho // TILE), -(-wo // TILE)
+    u, nh, nw = _input_tiles(x_BxHxWxI, pads, ho, wo)
     # g's padding rows are zeros, so whatever input they meet adds nothing
     gp = jnp.pad(g_BxHoxWoxO, ((0, 0), (0, TILE * nh - ho), (0, TILE * nw - wo), (0, 0)))
-    xp = jnp.pad(x_BxHxWxI, ((0, 0), (top, bottom + TILE * nh - ho), (left, right + TILE * nw - wo), (0, 0)))
-    u = _tiles_2d(xp, B_T, SPAN, nh, nw).reshape(SPAN * SPAN, b * nh * nw, cin)
-    v = _tiles_2d(gp, A_T.T, TILE, nh, nw).reshape(SPAN * SPAN, b * nh * nw, cout)
+    v = _tiles_2d(gp, A_T.T, TILE, nh, nw).reshape(SPAN * SPAN, -1, cout)
     # a long contraction over tiles, both operands row-major (as pointwise_conv's kernel gradient)
     m = jnp.einsum("uti,uto->uio", u, v).reshape(SPAN, SPAN, cin, cout)
     gt = jnp.asarray(G.T, x_BxHxWxI.dtype)
     return jnp.einsum("au,uvio,bv->abio", gt, m, gt)
+
+
+def _input_tiles(x_BxHxWxC, pads: Pads, ho: int, wo: int):
+    """B^T d B of every SPAN x SPAN input tile that an (ho, wo) output, rounded up to whole
+    TILE x TILE tiles, reads from x padded by `pads` -> ((SPAN^2, tiles, C), nh, nw)."""
+    (top, bottom), (left, right) = pads
+    nh, nw = -(-ho // TILE), -(-wo // TILE)
+    xp = jnp.pad(x_BxHxWxC, ((0, 0), (top, bottom + TILE * nh - ho), (left, right + TILE * nw - wo), (0, 0)))
+    return _tiles_2d(xp, B_T, SPAN, nh, nw).reshape(SPAN * SPAN, -1, x_BxHxWxC.shape[-1]), nh, nw
 
 
 def _tiles_2d(a_BxHxWxC, transform: np.ndarray, span: int, nh: int, nw: int):

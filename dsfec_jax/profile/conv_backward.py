@@ -20,23 +20,12 @@ SAME = ((1, 1), (1, 1))
 FORMS = ("forward", "kernel_grad_taps", "kernel_grad_winograd", "input_grad_xla", "input_grad_winograd")
 
 
-def positive_ints(text: str) -> list[int]:
-    """'12,24' -> [12, 24]: argparse's type for the comma-separated lists."""
-    try:
-        values = [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        values = []
-    if not values or min(values) < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated integers >= 1, e.g. 24,48")
-    return values
-
-
 def parse(argv=None) -> argparse.Namespace:
-    from ..argtypes import positive_int
+    from ..argtypes import positive_int, positive_int_list
 
     p = argparse.ArgumentParser(prog="python -m dsfec_jax.profile.conv_backward", description=__doc__.splitlines()[2])
-    p.add_argument("--sizes", type=positive_ints, default=[12, 24, 48, 96], help="image sides (square), comma-separated")
-    p.add_argument("--channels", type=positive_ints, default=[24, 32, 64, 96], help="channels in and out, comma-separated")
+    p.add_argument("--sizes", type=positive_int_list, default=[12, 24, 48, 96], help="image sides (square), comma-separated")
+    p.add_argument("--channels", type=positive_int_list, default=[24, 32, 64, 96], help="channels in and out, comma-separated")
     p.add_argument("--batch", type=positive_int, default=8)
     p.add_argument("--repeats", type=positive_int, default=9)
     p.add_argument("--threads", type=positive_int, default=None, help="pin to this many CPUs first (default: all)")
