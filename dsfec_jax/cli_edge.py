@@ -2,6 +2,7 @@
 
     dsfec edge  --out runs/edge/drive0 [--drive-frames 300 --seed 0]            # the synthetic test drive
     dsfec edge  --frames DIR --gps gps.csv --out OUT [--server http://127.0.0.1:8000] [--device cam-01]
+                [--token-file PATH]                                           # or $DSFEC_MAP_TOKEN
     dsfec serve --db runs/map.sqlite [--host 127.0.0.1 --port 8000]
     dsfec depth train --run-dir runs/depth/monodepth_street --steps 1500 --frames 2000
     dsfec depth eval  [--weights PATH] --frames 50
@@ -9,7 +10,9 @@
 `dsfec edge` runs detector -> depth -> placement on every frame (edge.pipeline), appends each frame's
 batch to OUT/batches.jsonl (a killed run resumes), posts it to --server through a disk queue
 (edge.uplink: an unreachable server loses nothing), and writes OUT/edge.geojson, edge.csv, edge.png
-and edge.json (per-stage times, frames/s, uplink counts). Without --frames it runs the street
+and edge.json (per-stage times, frames/s, uplink counts). It exits non-zero, saying why, when a
+batch was not delivered: still queued, rejected, a conflict, or a fatal answer (a wrong --server or
+token: the run stops at once and keeps its batches queued for the next run). Without --frames it runs the street
 benchmark's synthetic drive, whose GPS fixes it uses unless --gps is given.
 --depth: network (the shipped monodepth weights, or --depth-weights), truth (the synthetic drive's
 exact depth), stereo:DIR (your disparity maps in pixels) or depth:DIR (your depth maps in metres),
@@ -21,12 +24,14 @@ width, so a d is in pixels).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 from .argtypes import command_line, positive_int
 
 EDGE_COMMANDS = ("edge", "serve", "depth")
+TOKEN_ENV = "DSFEC_MAP_TOKEN"
 DEPTH_WEIGHTS = Path(__file__).resolve().parent / "weights" / "depth" / "monodepth_street.msgpack"
 
 
@@ -38,6 +43,11 @@ def add_commands(sub) -> None:
     e.add_argument("--out", required=True, help="output folder (resumed if it holds a run)")
     e.add_argument("--server", default=None, help="map service URL, e.g. http://127.0.0.1:8000")
     e.add_argument("--device", default="edge-01")
+    e.add_argument("--token-file", default=None,
+                   help=f"file whose first line is this device's write token (default: ${TOKEN_ENV}, if set)")
+    e.add_argument("--max-queued", type=positive_int, default=100_000,
+                   help="batches the disk queue may hold while the server is away; at the cap the run stops "
+                        "(nothing is dropped; a rerun resumes)")
     e.add_argument("--model", default="shuffle_yolov3")
     e.add_argument("--weights", default=None, help="detector weights (default: shipped)")
     e.add_argument("--score-threshold", type=float, default=0.3, help="detections kept for placement")
@@ -182,15 +192,50 @@ def run_edge_command(args) -> int:
     if args.server:
         from .edge.uplink import Uplink
 
-        uplink = Uplink(args.server, Path(args.out) / "queue")
+        try:
+            uplink = Uplink(args.server, Path(args.out) / "queue", token=read_token(args), max_queued=args.max_queued)
+        except (OSError, ValueError) as err:
+            sys.exit(f"dsfec edge: {err}")
     summary = run_edge(frames, pipeline, args.out, uplink, info, truth_origin)
     timing = summary["timing_this_run"]
     print(f"{summary['frames_placed']} frames ({summary['frames_resumed']} resumed, "
           f"{summary['frames_skipped_no_gps']} without GPS), {summary['objects']} objects placed; "
           f"{timing.get('frames_per_s', '-')} frames/s; outputs in {args.out}")
-    if uplink is not None and summary["uplink"]["queued"]:
-        print(f"dsfec edge: {summary['uplink']['queued']} batches still queued in {args.out}/queue "
-              f"(the server did not answer; the next run retries them)", file=sys.stderr)
+    return uplink_report(summary, Path(args.out) / "queue")
+
+
+def read_token(args) -> str | None:
+    """--token-file's first line, else $DSFEC_MAP_TOKEN, else None (a server run with --no-auth)."""
+    if args.token_file is None:
+        return os.environ.get(TOKEN_ENV, "").strip() or None
+    path = Path(args.token_file)
+    with open(path, "rb") as f:
+        first = f.read(8192).split(b"\n", 1)[0].strip()
+    if not first:
+        raise ValueError(f"--token-file {path}: its first line is empty (expected the device's token)")
+    if path.stat().st_mode & 0o077:
+        print(f"dsfec edge: warning: {path} is readable by others (chmod 600 {path})", file=sys.stderr)
+    return first.decode("ascii", "replace")
+
+
+def uplink_report(summary: dict, queue: Path) -> int:
+    """Print what the uplink delivered and what it did not; 0 only when every batch arrived."""
+    up = summary["uplink"]
+    if up is None:
+        return 0
+    print(f"uplink: {up['sent']} stored, {up['duplicate']} duplicates, {up['rejected']} rejected, "
+          f"{up['conflicts']} conflicts, {up['retried']} failed attempts retried, {up['queued']} still queued")
+    problems = []
+    if summary["stopped"]:
+        problems.append(summary["stopped"])
+    if up["queued"]:
+        problems.append(f"{up['queued']} batches still queued in {queue} (the next run sends them first)")
+    for kind, why in (("rejected", "the server refused them (reasons beside them)"),
+                      ("conflicts", "their ids are stored with other content")):
+        if up[f"{kind}_total"]:
+            problems.append(f"{up[f'{kind}_total']} batches in {queue / kind}: {why}")
+    if problems:
+        sys.exit("dsfec edge: not everything was delivered:\n  " + "\n  ".join(problems))
     return 0
 
 

@@ -50,7 +50,8 @@ class EdgePipeline:
     def covered(self, frame: EdgeFrame) -> bool:
         return bool(self.track.covered(frame.time_s))
 
-    def __call__(self, frame: EdgeFrame) -> FrameResult:
+    def __call__(self, frame: EdgeFrame, run_id: str | None = None) -> FrameResult:
+        """run_id: the recording run's id, in the batch id (edge.run keeps it in the run's folder)."""
         if not self.covered(frame):
             self.skipped += 1
             return FrameResult(None, None, None, None, {})
@@ -61,6 +62,7 @@ class EdgePipeline:
         t2 = time.perf_counter()
         ego = self.track.state(frame.time_s)
         objects, placed = self.placer.place(dets.xyxy, dets.names, dets.scores, depth_map, ego.enu, ego.heading_rad)
-        batch = frame_batch(self.device, frame.frame_id, frame.time_s + self.time_offset_s, ego.to_dict(), objects)
+        batch = frame_batch(self.device, frame.frame_id, frame.time_s + self.time_offset_s, ego.to_dict(), objects,
+                            run_id)
         t3 = time.perf_counter()
         return FrameResult(batch, dets, placed, depth_map, dict(detect=t1 - t0, depth=t2 - t1, place=t3 - t2))

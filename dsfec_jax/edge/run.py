@@ -1,18 +1,33 @@
 """`dsfec edge`'s loop: every frame through the pipeline, its batch kept on disk and posted.
 
 OUT_DIR/
-  batches.jsonl   one frame batch per line, appended and flushed as each frame finishes: a killed
+  run.json        {"run_id": ...}: a random id made when the recording run starts, in every batch
+                  id ("{device}:{run_id}:{frame}"): frame ids restart with each recording, so
+                  without it a second drive's batches would collide with the first's at the
+                  server (409 conflicts); a resumed run reads it back, so its ids stay the same
+  batches.jsonl   one frame batch per line, appended (and fsynced) as each frame finishes: a killed
                   run resumes after the last whole line (a torn last line is dropped), and frames
                   already there are neither recomputed nor posted again
-  queue/          the uplink's disk queue (edge.uplink): batches not yet acknowledged by the server
+  queue/          the uplink's disk queue (edge.spool): batches not yet acknowledged by the server
   edge.geojson, edge.csv, edge.png   the drive's outputs (geo.export), rewritten at the end
   edge.json       the run's summary: frames, skipped, objects, per-stage times, frames/s, uplink
-                  counts, the command and versions
+                  counts, why it stopped early (if it did), the command and versions
+
+Order of the writes, so that a kill -9 at any instant loses no frame: the batch's queue file is
+made durable first, then its line is appended to batches.jsonl and fsynced, and only then may the
+uplink post it. So a logged frame is always queued or at the server. Killed after the queue file
+and before (or in the middle of) its line: the file is queued but the frame is not logged; the
+next run appends the queued batch to the log instead of recomputing it (a recomputed batch could
+differ by a rounding and meet a 409). Killed in the middle of the queue write: the uplink removes
+the temporary file at start and the frame, never logged, is computed again.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import re
+import secrets
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -23,8 +38,11 @@ from ..core.provenance import versions
 from ..geo.export import write_drive_outputs
 from ..geo.geodesy import enu_to_geodetic
 from .pipeline import STAGES, EdgePipeline
+from .spool import SpoolFull, batch_id_of, is_temporary, read_queued
 
 BATCHES = "batches.jsonl"
+RUN = "run.json"
+_RUN_ID = re.compile(r"^[0-9a-f]{12}$")
 
 
 def done_batches(out_dir: Path) -> list[dict]:
@@ -63,41 +81,94 @@ def truth_objects(seen: dict, origin) -> list[dict]:
             for n, a, o, h in zip(names, lat, lon, alt)]
 
 
+def remove_temporaries(out_dir: Path) -> None:
+    """Atomic writes of run.json or the outputs that a kill interrupted before their rename."""
+    for path in out_dir.iterdir():
+        if is_temporary(path) and path.is_file():
+            path.unlink()
+
+
+def run_id(out_dir: Path) -> str:
+    """OUT_DIR/run.json's run id, made (random, 12 hex digits) and written atomically on first use."""
+    path = out_dir / RUN
+    if not path.exists():
+        atomic.write_json(path, {"run_id": secrets.token_hex(6)})
+    try:
+        value = json.loads(path.read_bytes()[:4096])["run_id"]
+    except (ValueError, KeyError, TypeError) as e:
+        raise ValueError(f"{path}: expected {{\"run_id\": \"<12 hex digits>\"}} ({e})") from None
+    if not isinstance(value, str) or not _RUN_ID.match(value):
+        raise ValueError(f"{path}: run_id {value!r} is not 12 hex digits")
+    return value
+
+
+def append_line(log, batch: dict) -> None:
+    """One batch as one line, on disk before the uplink may post it (see the module's docstring)."""
+    log.write(json.dumps(batch, allow_nan=False) + "\n")
+    log.flush()
+    os.fsync(log.fileno())
+
+
+def recover_queued(uplink, logged: list[dict], log) -> list[dict]:
+    """The batches a killed run queued but did not log (killed between the two writes): appended to
+    the log now, in queue order, so the frames count as done and are not recomputed."""
+    ids = {b["batch_id"] for b in logged}
+    recovered = [read_queued(p) for p in uplink.pending() if batch_id_of(p) not in ids]
+    for batch in recovered:
+        append_line(log, batch)
+    return recovered
+
+
 def run_edge(frames: Callable[[frozenset], Iterable], pipeline: EdgePipeline, out_dir: str | Path,
              uplink=None, info: dict | None = None, truth_origin=None,
              progress: Callable[[int, dict], None] | None = None, flush_s: float = 30.0) -> dict:
     """Run (or resume) the edge loop; `frames(skip)` yields the EdgeFrames not in `skip`.
     truth_origin: the synthetic world's ENU origin, to draw its ground-truth objects on the map.
-    Returns the summary written to edge.json."""
+    The loop stops early, with the reason in the summary's "stopped", when the uplink meets a fatal
+    answer (a wrong URL or token) or its queue is full; every frame done so far stays logged and
+    queued. Returns the summary written to edge.json."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    remove_temporaries(out_dir)
+    this_run = run_id(out_dir)
     batches = done_batches(out_dir)
-    done = frozenset(b["frame"] for b in batches)
-    seconds, seen = [], {}
+    seconds, seen, stopped = [], {}, None
     with open(out_dir / BATCHES, "a") as log:
+        if uplink is not None:
+            batches += recover_queued(uplink, batches, log)
+        done = frozenset(b["frame"] for b in batches)
         for frame in frames(done):
             if truth_origin is not None and frame.truth is not None:
                 objs = frame.truth.objects
                 seen.update({int(i): (n, c) for i, n, c in zip(objs.id, frame.truth.boxes.names, objs.center_enu)})
-            result = pipeline(frame)
+            result = pipeline(frame, this_run)
             if result.batch is None:
                 continue
-            log.write(json.dumps(result.batch, allow_nan=False) + "\n")
-            log.flush()
+            if uplink is None:
+                append_line(log, result.batch)
+            else:
+                try:
+                    uplink.send(result.batch, on_spooled=lambda batch: append_line(log, batch))
+                except SpoolFull as e:
+                    stopped = f"{e}; stopped before frame {frame.frame_id}, which the next run computes"
+                    break
             batches.append(result.batch)
             seconds.append(result.seconds)
-            if uplink is not None:
-                uplink.send(result.batch)
             if progress is not None:
                 progress(len(batches), result.batch)
-    delivered = uplink.flush(flush_s) if uplink is not None else None
+            if uplink is not None and uplink.fatal:
+                stopped = f"{uplink.fatal}; stopped after frame {frame.frame_id}"
+                break
+    uplink_summary = None
+    if uplink is not None:
+        uplink.flush(flush_s)
+        uplink.close()
+        uplink_summary = uplink.summary()
     paths = write_drive_outputs(out_dir, batches, stem="edge", truth=truth_objects(seen, truth_origin) or None,
                                 origin=pipeline.track.origin)
-    summary = {**(info or {}), "frames_placed": len(batches), "frames_resumed": len(done),
+    summary = {**(info or {}), "run_id": this_run, "frames_placed": len(batches), "frames_resumed": len(done),
                "frames_skipped_no_gps": pipeline.skipped, "objects": sum(len(b["objects"]) for b in batches),
-               "timing_this_run": stage_summary(seconds),
-               "uplink": None if uplink is None else {**uplink.counts, "queued": len(uplink.pending()),
-                                                      "delivered_all": delivered},
+               "stopped": stopped, "timing_this_run": stage_summary(seconds), "uplink": uplink_summary,
                "outputs": {k: str(v) for k, v in paths.items()}, "versions": versions()}
     atomic.write_json(out_dir / "edge.json", summary)
     return summary

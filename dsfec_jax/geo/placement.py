@@ -172,8 +172,10 @@ class Placer:
         return objects, ok
 
 
-def frame_batch(device: str, frame: str, time: float, ego: dict, objects: list[dict]) -> dict:
+def frame_batch(device: str, frame: str, time: float, ego: dict, objects: list[dict], run_id: str | None = None) -> dict:
     """The exchange format's frame batch (what an edge device posts for one frame); batch_id is
-    "device:frame", unique per device and frame."""
-    return {"batch_id": f"{device}:{frame}", "device": str(device), "frame": str(frame), "time": float(time),
+    "device:run_id:frame", unique per device, recording run and frame (frame ids restart with each
+    recording), or "device:frame" without a run id."""
+    batch_id = f"{device}:{run_id}:{frame}" if run_id else f"{device}:{frame}"
+    return {"batch_id": batch_id, "device": str(device), "frame": str(frame), "time": float(time),
             "ego": {k: float(ego[k]) for k in ("lat", "lon", "alt", "heading_deg")}, "objects": list(objects)}

@@ -5,14 +5,17 @@ import json
 
 import numpy as np
 import pytest
+from edge_fakes import FakeMap
 from PIL import Image
 
 from dsfec_jax.boxes.boxes2d import Boxes2D
+from dsfec_jax.cli_edge import TOKEN_ENV
 from dsfec_jax.data.camera.street import StreetConfig, generate_drive
 from dsfec_jax.edge import depth_sources as ds
 from dsfec_jax.edge.frames import EdgeFrame, drive_frames, folder_frames
 from dsfec_jax.edge.pipeline import EdgePipeline
 from dsfec_jax.edge.run import BATCHES, done_batches, run_edge
+from dsfec_jax.edge.uplink import Uplink
 from dsfec_jax.geo.gps import EgoTrack, GpsFixes, clean_fixes, write_gps_csv
 from dsfec_jax.geo.geodesy import geodetic_to_enu
 
@@ -71,31 +74,19 @@ def test_frames_outside_the_gps_track_are_skipped_and_counted(drive, frames):
 
 
 def test_a_killed_run_resumes_without_recomputing_or_reposting(drive, frames, tmp_path):
-    class Recorder:
-        def __init__(self):
-            self.counts, self.sent = {"sent": 0}, []
-
-        def send(self, batch):
-            self.sent.append(batch["frame"])
-
-        def flush(self, deadline_s):
-            return True
-
-        def pending(self):
-            return []
-
     def source(limit):
         return lambda skip: (f for f in frames[:limit] if f.frame_id not in skip)
 
-    first = Recorder()
-    run_edge(source(2), pipeline_for(drive, frames), tmp_path, first)
-    with open(tmp_path / BATCHES, "a") as f:
-        f.write('{"batch_id": "torn')                            # a kill in the middle of a line
-    second = Recorder()
-    summary = run_edge(source(4), pipeline_for(drive, frames), tmp_path, second)
-    assert first.sent == ["000000", "000001"] and second.sent == ["000002", "000003"]
+    with FakeMap() as server:
+        run_edge(source(2), pipeline_for(drive, frames), tmp_path, Uplink(server.url, tmp_path / "queue"))
+        first = list(server.stored)
+        with open(tmp_path / BATCHES, "a") as f:
+            f.write('{"batch_id": "torn')                            # a kill in the middle of a line
+        summary = run_edge(source(4), pipeline_for(drive, frames), tmp_path, Uplink(server.url, tmp_path / "queue"))
+    run_id = summary["run_id"]
+    assert first == [f"dev-1:{run_id}:00000{i}" for i in range(2)] and server.answers == [201] * 4
     assert [b["frame"] for b in done_batches(tmp_path)] == ["000000", "000001", "000002", "000003"]
-    assert summary["frames_resumed"] == 2 and summary["frames_placed"] == 4
+    assert summary["frames_resumed"] == 2 and summary["frames_placed"] == 4 and summary["uplink"]["delivered_all"]
     geo = json.loads((tmp_path / "edge.geojson").read_text())
     assert sum(f["geometry"]["type"] == "Point" for f in geo["features"]) == summary["objects"] > 0
     assert (tmp_path / "edge.png").stat().st_size > 1000 and (tmp_path / "edge.csv").exists()
@@ -165,7 +156,7 @@ def test_network_depth_reads_a_fraction_of_the_width_as_pixels():
     assert np.allclose(calibrated(EdgeFrame("x", 0.0, np.zeros((cam.height, cam.width, 3), np.uint8)), cam), depth / 2)
 
 
-def test_cli_edge_over_a_folder_with_user_depth(drive, frames, tmp_path):
+def test_cli_edge_over_a_folder_with_user_depth(drive, frames, tmp_path, monkeypatch):
     from dsfec_jax.cli import main
 
     d = write_folder(tmp_path, frames)
@@ -174,11 +165,20 @@ def test_cli_edge_over_a_folder_with_user_depth(drive, frames, tmp_path):
         np.save(tmp_path / "depth" / f"{f.frame_id}.npy", f.truth.depth)
     write_gps_csv(tmp_path / "gps.csv", GpsFixes.from_track(drive.gps))
     out = tmp_path / "out"
-    assert main(["edge", "--frames", str(d), "--gps", str(tmp_path / "gps.csv"), "--depth", f"depth:{tmp_path / 'depth'}",
-                 "--out", str(out), "--device", "cam-7"]) == 0
+    command = ["edge", "--frames", str(d), "--gps", str(tmp_path / "gps.csv"), "--depth", f"depth:{tmp_path / 'depth'}",
+               "--out", str(out), "--device", "cam-7"]
+    monkeypatch.delenv(TOKEN_ENV, raising=False)
+    with FakeMap(token="tok-7") as server:
+        with pytest.raises(SystemExit, match="not everything was delivered:\n  the server at .* answered HTTP 401"):
+            main(command + ["--server", server.url])                    # no token: it stops, keeps its batches
+        stopped = json.loads((out / "edge.json").read_text())
+        assert stopped["uplink"]["queued"] == stopped["frames_placed"] >= 1 and server.stored == {}
+        monkeypatch.setenv(TOKEN_ENV, "tok-7")
+        assert main(command + ["--server", server.url]) == 0
     summary = json.loads((out / "edge.json").read_text())
     assert summary["frames_placed"] == 4 and summary["timing_this_run"]["frames_per_s"] > 0
-    assert all(b["device"] == "cam-7" for b in done_batches(out))
+    assert summary["uplink"]["delivered_all"] and sorted(server.stored) == [b["batch_id"] for b in done_batches(out)]
+    assert all(b["device"] == "cam-7" for b in done_batches(out)) and server.auth[-1] == "Bearer tok-7"
     with pytest.raises(SystemExit, match="--gps"):
         main(["edge", "--frames", str(d), "--out", str(out)])
 
