@@ -196,7 +196,10 @@ def run_edge_command(args) -> int:
             uplink = Uplink(args.server, Path(args.out) / "queue", token=read_token(args), max_queued=args.max_queued)
         except (OSError, ValueError) as err:
             sys.exit(f"dsfec edge: {err}")
-    summary = run_edge(frames, pipeline, args.out, uplink, info, truth_origin)
+    try:
+        summary = run_edge(frames, pipeline, args.out, uplink, info, truth_origin)
+    except ValueError as err:  # a batches.jsonl, run.json or queued file changed by hand; a bad depth file
+        sys.exit(f"dsfec edge: {err}")
     timing = summary["timing_this_run"]
     print(f"{summary['frames_placed']} frames ({summary['frames_resumed']} resumed, "
           f"{summary['frames_skipped_no_gps']} without GPS), {summary['objects']} objects placed; "

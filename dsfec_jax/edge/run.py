@@ -55,7 +55,18 @@ def done_batches(out_dir: Path) -> list[dict]:
     if len(whole) != len(raw):
         with open(path, "r+b") as f:
             f.truncate(len(whole))
-    return [json.loads(line) for line in whole.decode().splitlines() if line.strip()]
+    return [_batch_line(path, n, line) for n, line in enumerate(whole.splitlines(), 1) if line.strip()]
+
+
+def _batch_line(path: Path, number: int, line: bytes) -> dict:
+    try:
+        batch = json.loads(line)
+    except ValueError as e:
+        raise ValueError(f"{path} line {number}: not a frame batch ({e}); a whole line is never torn by a kill, "
+                         f"so the file was changed by hand: fix or remove that line") from None
+    if not isinstance(batch, dict) or not isinstance(batch.get("batch_id"), str) or "frame" not in batch:
+        raise ValueError(f"{path} line {number}: expected a frame batch with batch_id and frame")
+    return batch
 
 
 def stage_summary(seconds: list[dict]) -> dict:
@@ -109,6 +120,14 @@ def append_line(log, batch: dict) -> None:
     os.fsync(log.fileno())
 
 
+def keep(batch: dict, log, uplink) -> None:
+    """A finished frame's batch: queued durably, then logged, then posted (see the module's docstring)."""
+    if uplink is None:
+        append_line(log, batch)
+    else:
+        uplink.send(batch, on_spooled=lambda queued: append_line(log, queued))
+
+
 def recover_queued(uplink, logged: list[dict], log) -> list[dict]:
     """The batches a killed run queued but did not log (killed between the two writes): appended to
     the log now, in queue order, so the frames count as done and are not recomputed."""
@@ -144,14 +163,11 @@ def run_edge(frames: Callable[[frozenset], Iterable], pipeline: EdgePipeline, ou
             result = pipeline(frame, this_run)
             if result.batch is None:
                 continue
-            if uplink is None:
-                append_line(log, result.batch)
-            else:
-                try:
-                    uplink.send(result.batch, on_spooled=lambda batch: append_line(log, batch))
-                except SpoolFull as e:
-                    stopped = f"{e}; stopped before frame {frame.frame_id}, which the next run computes"
-                    break
+            try:
+                keep(result.batch, log, uplink)
+            except SpoolFull as e:
+                stopped = f"{e}; stopped before frame {frame.frame_id}, which the next run computes"
+                break
             batches.append(result.batch)
             seconds.append(result.seconds)
             if progress is not None:

@@ -149,5 +149,11 @@ class Spool:
 
 
 def read_queued(path: Path) -> dict:
-    """A queued batch (its file was written atomically, so it is whole)."""
-    return json.loads(path.read_bytes())
+    """A queued batch (written atomically, so whole unless changed by hand: then a clear error)."""
+    try:
+        batch = json.loads(path.read_bytes())
+    except ValueError as e:
+        raise ValueError(f"{path}: not a JSON frame batch ({e})") from None
+    if not isinstance(batch, dict) or batch.get("batch_id") != batch_id_of(path) or "frame" not in batch:
+        raise ValueError(f"{path}: expected the frame batch {batch_id_of(path)!r} its name says")
+    return batch

@@ -298,16 +298,20 @@ class Uplink:
                 if self._closing:
                     return
                 path = self.spool.oldest()
-            self._post(path)  # the network and file I/O run outside the lock: send() goes on meanwhile
+            try:
+                self._post(path)  # the network and file I/O run outside the lock: send() goes on meanwhile
+            except Exception as e:  # a full disk, a queued file removed by hand...: stop loudly, not silently
+                self.fatal = f"the uplink's sender failed on {path}: {type(e).__name__}: {e}"
+                log.exception("%s; the sender stopped, the queue stays on disk", self.fatal)
             with self._cv:
                 self._cv.notify_all()
 
     def _post(self, path: Path) -> None:
         """POST the oldest queued file and act on the answer (see the module's table)."""
-        batch_id = batch_id_of(path)
+        batch_id, body = batch_id_of(path), path.read_bytes()
         start = time.monotonic()
         try:
-            status, text, location = self._http.post(path.read_bytes())
+            status, text, location = self._http.post(body)
         except (OSError, HTTPException) as e:  # refused, reset, timed out, unreachable, garbled
             status, text, location = None, f"{type(e).__name__}: {e}", None
         if self.observer is not None:

@@ -121,3 +121,16 @@ def test_the_token_comes_from_a_file_or_the_environment(tmp_path, monkeypatch, c
         read_token(types.SimpleNamespace(token_file=str(path)))
     monkeypatch.delenv(TOKEN_ENV)
     assert read_token(types.SimpleNamespace(token_file=None)) is None
+
+
+def test_a_log_line_or_queued_file_changed_by_hand_is_named(tmp_path):
+    out = tmp_path / "edge"
+    run(out, DOWN, 2)
+    queued = sorted((out / "queue").glob("*.json"))
+    (out / BATCHES).write_text("")                                       # both frames now need recovering
+    queued[1].write_text(json.dumps({"batch_id": "someone-else:1", "frame": "000001"}))
+    with pytest.raises(ValueError, match=f"{queued[1].name}: expected the frame batch 'dev-01:.*:000001'"):
+        run(out, DOWN, 2)
+    (out / BATCHES).write_text('{"batch_id": "a", "frame": "0"}\n{"batch_id": \n{"batch_id": "b", "frame": "1"}\n')
+    with pytest.raises(ValueError, match=f"{BATCHES} line 2: not a frame batch"):
+        run(out, DOWN, 2)

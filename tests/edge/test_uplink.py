@@ -254,7 +254,7 @@ def test_a_200_that_is_not_the_map_service_answering_is_fatal(tmp_path, body):
         link.close()
 
 
-def test_the_token_goes_as_a_bearer_header(tmp_path):
+def test_the_token_goes_as_a_bearer_header(tmp_path, caplog):
     with FakeMap(token="s3cret-Token_1") as server:
         without = Uplink(server.url, tmp_path / "q1")
         without.send(batch(0))
@@ -265,6 +265,13 @@ def test_the_token_goes_as_a_bearer_header(tmp_path):
         without.close()
         with_token.close()
     assert server.auth == [None, "Bearer s3cret-Token_1"]
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="dsfec_jax.edge.uplink"):
+        Uplink("http://127.0.0.1:9", tmp_path / "q4", token="t")          # loopback: no warning
+        Uplink("https://map.example:8443", tmp_path / "q5", token="t")
+        assert caplog.records == []
+        Uplink("http://10.1.2.3:8000", tmp_path / "q6", token="t")
+    assert "plain http to 10.1.2.3" in caplog.records[0].getMessage()
     for bad in ("two words", "line\nbreak", "", "x" * 5000):
         with pytest.raises(ValueError, match="token") as err:
             Uplink(server.url, tmp_path / "q3", token=bad)
@@ -285,3 +292,13 @@ def test_at_its_cap_the_spool_refuses_new_batches_and_keeps_the_old(tmp_path, ca
     link.close()
     with pytest.raises(SpoolFull, match="MB of 0.0 MB"):
         Uplink("http://127.0.0.1:9", tmp_path / "q2", max_queued_bytes=10, room_wait_s=0.0).send(batch(0))
+
+
+def test_a_queued_file_removed_by_hand_stops_the_sender_loudly(tmp_path):
+    link = Uplink("http://127.0.0.1:9", tmp_path / "queue")
+    link.spool.write("dev-01:000000", b"{}")                            # on disk, not yet handed over
+    path, = link.spool.folder.glob("*.json")
+    link.spool.append(path, 2)
+    path.unlink()
+    assert not link.flush(5.0) and "FileNotFoundError" in link.fatal and str(path) in link.fatal
+    link.close()
