@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import collections
 import json
+import os
 import re
 import urllib.parse
 from pathlib import Path
@@ -59,35 +60,33 @@ class Spool:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.max_files, self.max_bytes = max_files, max_bytes
-        self.removed_temporaries = self._remove_temporaries()
-        self._index: collections.deque[tuple[Path, int]] = collections.deque(self._scan())
-        self.nbytes = sum(size for _, size in self._index)
-        self._seq = self._next_sequence()
+        self.removed_temporaries: list[str] = []
+        queued = sorted(self._open_folder(self.folder))  # names sort as their sequence numbers
+        self._index: collections.deque[tuple[str, int]] = collections.deque(queued)  # (file name, size)
+        self.nbytes = sum(size for _, size in queued)
+        numbers = [int(name[:12]) for name, _ in queued]
+        for name in SET_ASIDE:  # a reused number could overwrite an earlier set-aside batch of that name
+            if (self.folder / name).is_dir():
+                numbers += [int(found[:12]) for found, _ in self._open_folder(self.folder / name)]
+        self._seq = max(numbers, default=-1) + 1
 
-    # -- opening: the only listings of the folder --------------------------------------------------
-    def _folders(self) -> list[Path]:
-        return [self.folder] + [self.folder / name for name in SET_ASIDE if (self.folder / name).is_dir()]
-
-    def _remove_temporaries(self) -> list[str]:
-        removed = []
-        for folder in self._folders():
-            for path in folder.iterdir():
-                if is_temporary(path) and path.is_file():
-                    path.unlink()
-                    removed.append(str(path.relative_to(self.folder)))
-            if removed:
-                sync_dir(folder)
-        return removed
-
-    def _scan(self) -> list[tuple[Path, int]]:
-        queued = sorted(p for p in self.folder.iterdir() if _QUEUED.match(p.name) and p.is_file())
-        return [(p, p.stat().st_size) for p in queued]
-
-    def _next_sequence(self) -> int:
-        """One past the largest sequence in the queue and the set-aside folders (a reused number
-        could overwrite an earlier rejected batch when it is set aside too)."""
-        names = [p.name for folder in self._folders() for p in folder.iterdir()]
-        return max((int(m.group(1)) for m in map(_QUEUED.match, names) if m), default=-1) + 1
+    def _open_folder(self, folder: Path) -> list[tuple[str, int]]:
+        """One pass over a folder, the only listing of it: removes temporaries, returns the names
+        and sizes of the queued (or set-aside) batch files."""
+        found, removed = [], False
+        with os.scandir(folder) as entries:
+            for entry in entries:
+                if not entry.is_file():
+                    continue
+                if entry.name.startswith(".") and entry.name.endswith(".tmp"):  # is_temporary, without a Path
+                    os.unlink(entry.path)
+                    self.removed_temporaries.append(os.path.relpath(entry.path, self.folder))
+                    removed = True
+                elif _QUEUED.match(entry.name):
+                    found.append((entry.name, entry.stat().st_size))
+        if removed:
+            sync_dir(folder)
+        return found
 
     # -- the producer --------------------------------------------------------------------------
     def has_room(self, size: int) -> bool:
@@ -111,7 +110,7 @@ class Spool:
         return path, len(body)
 
     def append(self, path: Path, size: int) -> None:
-        self._index.append((path, size))
+        self._index.append((path.name, size))
         self.nbytes += size
 
     # -- the consumer: always the oldest ---------------------------------------------------------
@@ -119,16 +118,16 @@ class Spool:
         return len(self._index)
 
     def oldest(self) -> Path | None:
-        return self._index[0][0] if self._index else None
+        return self.folder / self._index[0][0] if self._index else None
 
     def paths(self) -> list[Path]:
-        return [p for p, _ in self._index]
+        return [self.folder / name for name, _ in self._index]
 
     def pop_oldest(self, path: Path) -> None:
         """Drop the oldest entry from the index, which must be `path` (its file is gone already)."""
         head, size = self._index[0]
-        if head != path:
-            raise RuntimeError(f"spool: {path.name} is not the oldest queued batch ({head.name})")
+        if head != path.name:
+            raise RuntimeError(f"spool: {path.name} is not the oldest queued batch ({head})")
         self._index.popleft()
         self.nbytes -= size
 
