@@ -39,6 +39,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 from dsfec_jax.core.atomic import write_json, write_text
 from dsfec_jax.core.checkpoint import manifest_path
@@ -359,4 +360,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 from dsfec_jax.core import atomic
 from dsfec_jax.core.provenance import versions
@@ -143,4 +144,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

@@ -18,6 +18,7 @@ import sys
 
 import jax
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 from dsfec_jax.core.atomic import write_text
 from dsfec_jax.core.grid import VOD_GRID, Grid
@@ -110,4 +111,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

@@ -9,6 +9,7 @@ gives FPS on an RTX A4000 and a Jetson AGX Orin.
 
 from __future__ import annotations
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax.models.radarnext.paper import TABLE2
 from search import grid
 
@@ -37,4 +38,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

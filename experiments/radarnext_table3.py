@@ -9,6 +9,7 @@ Position 3 fits no single feature map of the public neck by its parameter count 
 
 from __future__ import annotations
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax.models.radarnext.paper import TABLE3
 from search import grid
 
@@ -38,4 +39,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

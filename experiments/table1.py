@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax.models.dsfec import paper
 from dsfec_jax.profile.zoo_table import RECORDS, shipped_accuracy
 
@@ -47,4 +48,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

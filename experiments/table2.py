@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax.models.dsfec import paper
 from search import stem
 
@@ -21,4 +22,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

@@ -28,6 +28,7 @@ import statistics
 import sys
 from pathlib import Path
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax.core import atomic
 from dsfec_jax.models.yolo_rd import paper
 from dsfec_jax.models.yolo_rd.variants import (TABLE5_ROWS, TABLE6_OPTIONS, VARIANTS, fusion_variant,
@@ -189,4 +190,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 
 from .journal import Journal
@@ -47,4 +48,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

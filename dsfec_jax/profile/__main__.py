@@ -13,6 +13,7 @@ import argparse
 import json
 import shlex
 import sys
+from ..core.host_memory import prepare_xla_process
 
 
 def parse(argv=None) -> argparse.Namespace:
@@ -87,4 +88,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

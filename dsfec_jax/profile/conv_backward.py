@@ -15,6 +15,7 @@ import shlex
 import sys
 import time
 from typing import Callable
+from ..core.host_memory import prepare_xla_process
 
 SAME = ((1, 1), (1, 1))
 FORMS = ("forward", "kernel_grad_taps", "kernel_grad_winograd", "input_grad_xla", "input_grad_winograd")
@@ -100,4 +101,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     sys.exit(main())

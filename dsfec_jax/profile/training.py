@@ -634,4 +634,5 @@ def _jsonable(obj):
 
 
 if __name__ == "__main__":
+    host_memory.prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(worker_main())

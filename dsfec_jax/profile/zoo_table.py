@@ -13,6 +13,7 @@ import json
 import re
 from pathlib import Path
 
+from ..core.host_memory import prepare_xla_process
 from ..core import atomic
 from .. import zoo
 
@@ -167,4 +168,5 @@ def _threads(env: dict) -> str:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

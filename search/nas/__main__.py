@@ -22,6 +22,7 @@ import argparse
 import shlex
 import sys
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from .run import PROFILES, run_nas
 from .spaces import SPACES
 from .spos import SAMPLINGS
@@ -79,4 +80,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

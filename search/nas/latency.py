@@ -32,6 +32,7 @@ from typing import Callable, Sequence
 import jax
 import numpy as np
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 from dsfec_jax.core import atomic
 from dsfec_jax.core.environment import environment
@@ -228,4 +229,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

@@ -34,6 +34,7 @@ import sys
 import time
 from pathlib import Path
 
+from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 from dsfec_jax.core import atomic, checkpoint
 from dsfec_jax.core.environment import environment
@@ -232,4 +233,5 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
+    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

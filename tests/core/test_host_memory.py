@@ -1,9 +1,14 @@
-"""The project's commands restart once with glibc tunables and async dispatch off (core/host_memory.py);
-library users and the test runner are never re-executed."""
+"""The commands that run XLA restart once with glibc tunables and async dispatch off
+(core/host_memory.py); the map service, `dsfec --help`, library users and the test runner are never
+re-executed, and nothing happens at import."""
 
+import ast
 import os
+import socket
 import subprocess
 import sys
+import time
+import urllib.request
 from pathlib import Path
 
 import pytest
@@ -92,3 +97,112 @@ def test_a_project_command_restarts_with_the_settings_and_its_arguments():
     assert mine.returncode == 3 and mine.stdout.split("\n")[2] == "True", mine.stderr
     off = run({hm.OPT_OUT: "0"})
     assert off.returncode == 3 and off.stdout.split("\n")[0] == "" and off.stdout.split("\n")[2] == "True"
+
+
+ROOT = Path(__file__).resolve().parents[2]
+# the entry points (`if __name__ == "__main__"`) that run no XLA and so keep glibc's and JAX's defaults
+LIGHT_ENTRY_POINTS = {
+    "dsfec_jax/cli.py",  # dsfec: main() prepares every subcommand but `serve` after parsing (tested below)
+    "dsfec_jax/service/__main__.py",  # the map service
+    "dsfec_jax/edge/loadtest.py",  # HTTP clients against a service it starts
+    "dsfec_jax/data/__main__.py", "dsfec_jax/data/camera/street/__main__.py",  # numpy data tools
+    "dsfec_jax/data/points/synthetic/__main__.py", "dsfec_jax/data/rd/synthetic/__main__.py",
+    "dsfec_jax/metrics/nuscenes.py", "dsfec_jax/metrics/voc.py",  # numpy scorers of files
+    "search/report.py", "search/compare.py", "experiments/radarnext_accuracy.py",  # read records, write reports
+}
+
+
+def _main_block(tree: ast.Module) -> ast.If | None:
+    return next((node for node in tree.body if isinstance(node, ast.If) and "__main__" in ast.unparse(node.test)), None)
+
+
+def test_every_entry_point_that_runs_xla_prepares_its_process_first():
+    """A command's relaunch is in its own `__main__` block now, not at import: each entry point
+    either calls prepare_xla_process before anything else there, or is listed as light."""
+    heavy, light = [], []
+    for path in sorted(p for d in ("dsfec_jax", "search", "experiments") for p in (ROOT / d).rglob("*.py")):
+        block = _main_block(ast.parse(path.read_text()))
+        if block is None:
+            continue
+        name = path.relative_to(ROOT).as_posix()
+        first = ast.unparse(block.body[0])
+        (light if name in LIGHT_ENTRY_POINTS else heavy).append((name, first))
+    assert {name for name, _ in light} == LIGHT_ENTRY_POINTS  # the list names no module that is gone
+    assert len(heavy) >= 20 and all(first.endswith("prepare_xla_process()") for _, first in heavy), heavy
+    assert all("prepare_xla_process" not in first for _, first in light), light
+
+
+class _Prepared(Exception):
+    pass
+
+
+def test_dsfec_prepares_every_subcommand_but_serve_and_only_after_parsing(monkeypatch, tmp_path, capsys):
+    from dsfec_jax import cli, cli_edge
+
+    def prepared():
+        raise _Prepared
+
+    monkeypatch.setattr(hm, "prepare_xla_process", prepared)
+    monkeypatch.setattr(cli_edge, "main", lambda args: 0)  # `serve` would serve forever
+    for argv in (["eval", "--model", "dsfec_s"], ["train", "--model", "dsfec_s", "--run-dir", str(tmp_path)],
+                 ["edge", "--out", str(tmp_path)], ["bench"], ["depth", "eval"]):
+        with pytest.raises(_Prepared):
+            cli.main(argv)
+    assert cli.main(["serve", "--db", str(tmp_path / "map.db")]) == 0
+    for argv in (["--help"], ["train", "--help"], ["train", "--no-such-flag"]):
+        with pytest.raises(SystemExit):
+            cli.main(argv)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _start_service(command: list[str], tmp_path: Path, name: str) -> tuple[subprocess.Popen, int, Path]:
+    port = _free_port()
+    env = {k: v for k, v in os.environ.items() if k not in ("GLIBC_TUNABLES", hm.OPT_OUT)}
+    env["PYTHONPROFILEIMPORTTIME"] = "1"  # the process reports every module it imports on stderr
+    log = tmp_path / f"{name}.imports"
+    with open(log, "w") as err:
+        proc = subprocess.Popen([*command, "--db", str(tmp_path / f"{name}.db"), "--port", str(port)], env=env,
+                                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=err)
+    return proc, port, log
+
+
+def _wait_until_serving(proc: subprocess.Popen, port: int) -> None:
+    deadline = time.monotonic() + 60
+    while True:
+        assert proc.poll() is None, f"the service exited with {proc.returncode}"
+        try:
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2).read()
+            return
+        except OSError:
+            assert time.monotonic() < deadline, "the service did not answer /health within 60 s"
+            time.sleep(0.05)
+
+
+def test_the_map_service_process_starts_light(tmp_path):
+    """`python -m dsfec_jax.service` and `dsfec serve`, started as a user would, serving: their
+    process was not restarted with glibc's tunables (its environment), imported no JAX (its own
+    import log) and has no XLA library mapped (/proc/PID/maps)."""
+    dsfec = Path(sys.executable).with_name("dsfec")
+    if not dsfec.exists():
+        pytest.skip(f"no dsfec console script beside {sys.executable}")
+    commands = {"module": [sys.executable, "-m", "dsfec_jax.service"], "cli": [str(dsfec), "serve"]}
+    started = {name: _start_service(command, tmp_path, name) for name, command in commands.items()}
+    try:
+        for name, (proc, port, log) in started.items():
+            _wait_until_serving(proc, port)
+            environ = Path(f"/proc/{proc.pid}/environ").read_bytes().split(b"\0")
+            assert not any(item.startswith(b"GLIBC_TUNABLES=") for item in environ), name
+            imported = {line.rsplit("|", 1)[-1].strip() for line in log.read_text().splitlines() if "|" in line}
+            assert "dsfec_jax.service.server" in imported and "uvicorn" in imported, name  # the log is the server's
+            assert not {"jax", "jaxlib", "flax"} & imported, (name, sorted({"jax", "jaxlib", "flax"} & imported))
+            maps = Path(f"/proc/{proc.pid}/maps").read_text()
+            assert "jaxlib" not in maps and "xla_extension" not in maps, name
+    finally:
+        for proc, _, _ in started.values():
+            proc.terminate()
+            proc.wait(30)
