@@ -30,6 +30,11 @@ atomically into --out (default experiments/records/camera) and prints the markdo
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import contextlib
 import io
@@ -39,7 +44,6 @@ import shlex
 import sys
 from pathlib import Path
 
-from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 from dsfec_jax.core.atomic import write_json, write_text
 from dsfec_jax.core.checkpoint import manifest_path
@@ -360,5 +364,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

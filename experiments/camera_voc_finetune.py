@@ -21,6 +21,11 @@ is not used: the rows are scored here).
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import dataclasses
 import sys
@@ -28,7 +33,6 @@ from pathlib import Path
 
 import numpy as np
 
-from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 from dsfec_jax.core import atomic
 from dsfec_jax.core.provenance import versions
@@ -144,5 +148,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

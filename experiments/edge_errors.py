@@ -26,13 +26,17 @@ The figures are synthetic: rendered frames, exact ground truth.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-from dsfec_jax.core.host_memory import prepare_xla_process
 
 RANGE_NOTE = "paper §4.3 / §5: the depth error within 40 m does not exceed 5 %"
 SCORE = 0.3
@@ -177,5 +181,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

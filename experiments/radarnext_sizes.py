@@ -12,13 +12,17 @@ Flags: --out FILE writes {command, seed, environment, rows, latency} as JSON (at
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import json
 import sys
 
 import jax
 
-from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 from dsfec_jax.core.atomic import write_text
 from dsfec_jax.core.grid import VOD_GRID, Grid
@@ -111,5 +115,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

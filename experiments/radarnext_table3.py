@@ -9,7 +9,11 @@ Position 3 fits no single feature map of the public neck by its parameter count 
 
 from __future__ import annotations
 
-from dsfec_jax.core.host_memory import prepare_xla_process
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 from dsfec_jax.models.radarnext.paper import TABLE3
 from search import grid
 
@@ -39,5 +43,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

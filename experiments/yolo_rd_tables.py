@@ -23,12 +23,16 @@ orderings and gaps compare.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import dataclasses
 import statistics
 import sys
 from pathlib import Path
 
-from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax.core import atomic
 from dsfec_jax.models.yolo_rd import paper
 from dsfec_jax.models.yolo_rd.variants import (TABLE5_ROWS, TABLE6_OPTIONS, VARIANTS, fusion_variant,
@@ -190,5 +194,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

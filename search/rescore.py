@@ -11,10 +11,14 @@ on its own (atomically), so a killed rescore resumes where it stopped.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import sys
 
-from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 
 from .journal import Journal
@@ -48,5 +52,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

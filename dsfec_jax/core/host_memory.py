@@ -23,8 +23,9 @@ next call's mmap waits on. Two settings answer it:
 glibc reads its tunables only at start-up, so the settings can only come from the environment
 the process starts with. `relaunch_with_host_settings` execs the same command line again with
 GLIBC_TUNABLES extended. The commands that run XLA call `prepare_xla_process` when they start
-(the `__main__` block of each such module; `dsfec` after parsing its arguments, for every
-subcommand but `serve`), which relaunches where the process was started as that command
+(each such module in an `if __name__ == "__main__"` guard above its imports, so the first
+process execs before it loads JAX; `dsfec` after parsing its arguments, for every subcommand
+but `serve`), which relaunches where the process was started as that command
 (`dsfec ...`, `python -m dsfec_jax... | search... | experiments...`) and then turns async
 dispatch off where the heap keeps buffers. Nothing happens at import: the map service (a
 long-lived server that must give memory back and start fast), `dsfec --help`, library users and

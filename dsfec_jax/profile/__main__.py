@@ -9,11 +9,15 @@ paper's formula). --threads must be handled before XLA starts (first jax computa
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from ..core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import json
 import shlex
 import sys
-from ..core.host_memory import prepare_xla_process
 
 
 def parse(argv=None) -> argparse.Namespace:
@@ -88,5 +92,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

@@ -10,12 +10,16 @@ it to check them on another CPU. Each form is jitted alone and timed in steady s
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from ..core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import shlex
 import sys
 import time
 from typing import Callable
-from ..core.host_memory import prepare_xla_process
 
 SAME = ((1, 1), (1, 1))
 FORMS = ("forward", "kernel_grad_taps", "kernel_grad_winograd", "input_grad_xla", "input_grad_winograd")
@@ -101,5 +105,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     sys.exit(main())

@@ -18,11 +18,15 @@ command again to resume a killed run.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import shlex
 import sys
 
-from dsfec_jax.core.host_memory import prepare_xla_process
 from .run import PROFILES, run_nas
 from .spaces import SPACES
 from .spos import SAMPLINGS
@@ -80,5 +84,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())

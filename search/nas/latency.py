@@ -21,6 +21,11 @@ each subnet's exported network (`--runtime onnx`, the deployment runtime):
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import dataclasses
 import json
@@ -32,7 +37,6 @@ from typing import Callable, Sequence
 import jax
 import numpy as np
 
-from dsfec_jax.core.host_memory import prepare_xla_process
 from dsfec_jax import zoo
 from dsfec_jax.core import atomic
 from dsfec_jax.core.environment import environment
@@ -229,5 +233,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    prepare_xla_process()  # it runs XLA: glibc's and JAX's settings first (core/host_memory.py)
     raise SystemExit(main())
