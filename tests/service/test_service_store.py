@@ -20,12 +20,13 @@ def test_a_batch_that_fails_half_way_leaves_nothing(tmp_path, monkeypatch):
     assert store.put(good) == "stored"
 
     def half(conn, b, digest, received):  # the batch row goes in, then the objects fail
-        conn.execute("INSERT INTO batches VALUES (?, ?, ?, ?, 0, 0, 0, 0, 0, ?, ?)",
-                     (b.batch_id, b.device, b.frame, b.time, digest, received))
+        conn.execute("INSERT INTO batches (device, batch_id, frame, time, ego_lat, ego_lon, ego_alt, ego_heading_deg,"
+                     " n_objects, content_sha256, received) VALUES (?, ?, ?, ?, 0, 0, 0, 0, 0, ?, ?)",
+                     (b.device, b.batch_id, b.frame, b.time, digest, received))
         raise sqlite3.OperationalError("disk I/O error (simulated)")
 
     monkeypatch.setattr(Store, "_insert", staticmethod(half))
-    with pytest.raises(sqlite3.OperationalError):
+    with pytest.raises(sqlite3.OperationalError, match="simulated"):
         store.put(FrameBatch.model_validate(make_batch(1, n_objects=3)))
     monkeypatch.undo()
     assert store.counts() == {"batches": 1, "objects": 3, "devices": 1}
@@ -39,9 +40,10 @@ def test_reads_come_back_in_the_exchange_format(tmp_path):
     store = Store(tmp_path / "map.sqlite")
     posted = make_batch(4, n_objects=2)
     store.put(FrameBatch.model_validate(posted))
-    batches, truncated = store.objects()
-    assert batches == [posted] and not truncated
-    assert store.tracks() == {"dev-01": [(posted["time"], posted["ego"]["lon"], posted["ego"]["lat"])]}
+    batches, truncated, cursor = store.objects()
+    assert batches == [posted] and not truncated and cursor == 2
+    assert store.tracks() == ({"dev-01": [(posted["time"], posted["ego"]["lon"], posted["ego"]["lat"])]}, 1)
+    assert list(store.export()) == [posted]
     store.close()
 
 
