@@ -106,8 +106,9 @@ def serve(db_path: str | Path, host: str = "127.0.0.1", port: int = 8000, log_le
                                   ssl_keyfile=ssl_keyfile, ssl_certfile=ssl_certfile)).run()
 
 
-def guarded_config(app, host: str, port: int, **options) -> uvicorn.Config:
+def guarded_config(app, host: str, port: int, header_timeout_s: float = HEADER_TIMEOUT_S, **options) -> uvicorn.Config:
     """uvicorn's Config for `app` with the connection limits of the module docstring."""
-    return uvicorn.Config(app, host=host, port=port, http=HeaderDeadlineH11,
+    protocol = type("HeaderDeadlineH11", (HeaderDeadlineH11,), {"header_timeout_s": header_timeout_s})
+    return uvicorn.Config(app, host=host, port=port, http=protocol,
                           h11_max_incomplete_event_size=MAX_HEADER_BYTES, limit_concurrency=LIMIT_CONCURRENCY,
                           timeout_keep_alive=KEEP_ALIVE_S, **options)

@@ -35,14 +35,15 @@ class LiveServer:
     the real server's connection guards (server.guarded_config). Stops on exit; may be started
     again on the same port (an outage and a recovery). `access`: write auth off by default."""
 
-    def __init__(self, db_path, port: int | None = None, access: Access = OPEN):
+    def __init__(self, db_path, port: int | None = None, access: Access = OPEN, header_timeout_s: float = 10.0):
         self.db_path, self.port, self.access = db_path, port or free_port(), access
+        self.header_timeout_s = header_timeout_s
         self.url = f"http://127.0.0.1:{self.port}"
         self._server = self._thread = None
 
     def start(self) -> "LiveServer":
         config = guarded_config(create_app(self.db_path, access=self.access), "127.0.0.1", self.port,
-                                log_level="warning")
+                                header_timeout_s=self.header_timeout_s, log_level="warning")
         self._server = uvicorn.Server(config)
         self._thread = threading.Thread(target=self._server.run, daemon=True)
         self._thread.start()
