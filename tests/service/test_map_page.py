@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from map_page import CHROMIUM, body_attributes, chromium
-from service_helpers import LON0, LiveServer, make_batch, post
+from map_page import CHROMIUM, body_attributes, bulk_fill, chromium
+from service_helpers import LON0, LiveServer, get, make_batch, post
 
 pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"{CHROMIUM} is not installed (Debian package chromium)")
 
@@ -55,3 +55,17 @@ def test_the_screenshot_shows_tracks_and_class_colours(server, tmp_path):
     assert len(np.unique(canvas.reshape(-1, 3), axis=0)) > 50     # not a blank or one-colour canvas
     assert pixels("#2b8a3e") > 300 and pixels("#0b7285") > 300     # the first two devices' track lines
     assert pixels("#1f77b4", 80) > 20 and pixels("#d62728", 80) > 20  # car and pedestrian dots
+
+
+def test_the_page_draws_a_large_database_within_its_limits(tmp_path):
+    """150k frame batches (past the ~125k positions at which spreading a track into Math.min threw
+    a RangeError and left the map blank): the page draws the latest OBJECT_LIMIT objects and the
+    server-decimated tracks, with no error, and refreshes."""
+    bulk_fill(tmp_path / "big.sqlite", 150_000, devices=4, per_batch=1)
+    with LiveServer(tmp_path / "big.sqlite") as srv:
+        dom = chromium(srv.url + "/", tmp_path / "profile", "--dump-dom", budget_ms=7000).stdout
+        tracks = get(srv.url, "/tracks")[1]
+    attrs = body_attributes(dom)
+    assert "error" not in attrs, attrs
+    assert attrs["objects"] == "5000" and attrs["tracks"] == "4" and int(attrs["drawn"]) >= 2
+    assert [len(f["geometry"]["coordinates"]) for f in tracks["features"]] == [2000] * 4  # max_points per device

@@ -210,3 +210,20 @@ def test_a_stored_row_with_an_absurd_time_does_not_break_reads(tmp_path):
         bad = [f["properties"] for f in fc["features"] if f["properties"]["time"] == 1e13]
         assert len(bad) == 2 and all(p["time_iso"] is None for p in bad)
         assert get(srv.url, "/tracks")[0] == 200
+
+
+def test_dsfec_serve_takes_the_server_options_and_the_token_command():
+    """One argument definition (service/options.py) behind `dsfec serve` and `python -m dsfec_jax.service`."""
+    import argparse
+
+    from dsfec_jax.cli_edge import add_commands
+
+    p = argparse.ArgumentParser(prog="dsfec")
+    add_commands(p.add_subparsers(dest="command"))
+    a = p.parse_args(["serve", "--db", "m.sqlite", "--synchronous", "NORMAL", "--log-level", "debug", "--no-access-log",
+                      "--allowed-host", "map.example.org", "--retention-days", "30", "--reads", "token"])
+    assert (a.synchronous, a.log_level, a.access_log, a.allowed_host, a.retention_days, a.reads, a.admin) == \
+        ("NORMAL", "debug", False, ["map.example.org"], 30.0, "token", None)
+    assert p.parse_args(["serve", "--db", "m.sqlite"]).access_log  # access logs on by default
+    b = p.parse_args(["serve", "token", "add", "--db", "m.sqlite", "--device", "cam-01"])
+    assert (b.admin, b.token_action, b.device, b.db, b.role) == ("token", "add", ["cam-01"], "m.sqlite", "device")

@@ -206,3 +206,19 @@ def test_the_map_page_and_its_script_are_served(server):
     assert status == 200 and "<canvas" in page and "static/map.js" in page
     status, script = get(server.url, "/static/map.js")
     assert status == 200 and "dataset.objects" in script
+
+
+def test_objects_after_a_cursor_are_only_the_ones_stored_since(fresh):
+    for i in (5, 6):
+        assert post(fresh.url, make_batch(i, n_objects=2))[0] == 201
+    first = get(fresh.url, "/objects")[1]
+    assert len(first["features"]) == 4 and first["cursor"] == 4
+    assert post(fresh.url, make_batch(1, n_objects=3))[0] == 201  # older in time, stored later (a queue drained)
+    new = get(fresh.url, f"/objects?after={first['cursor']}")[1]
+    assert [f["properties"]["frame"] for f in new["features"]] == ["frame-000001"] * 3 and new["cursor"] == 7
+    idle = get(fresh.url, f"/objects?after={new['cursor']}")[1]
+    assert idle["features"] == [] and idle["cursor"] == 7 and not idle["truncated"]
+    paged = get(fresh.url, "/objects?after=0&limit=3")[1]
+    assert len(paged["features"]) == 3 and paged["truncated"] and paged["cursor"] == 3
+    tracks = get(fresh.url, "/tracks")[1]
+    assert tracks["cursor"] == 3 and get(fresh.url, "/tracks?after=2")[1]["features"][0]["geometry"]["type"] == "Point"

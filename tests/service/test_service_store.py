@@ -66,3 +66,50 @@ def test_the_service_starts_light_without_jax():
             f"print(sorted(m for m in {heavy!r} if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
     assert out.stdout.strip() == "[]", out
+
+
+def _vm_steps(store: Store, read) -> int:
+    """SQLite virtual-machine instructions `read()` costs on the calling thread's connection: a
+    count of work that does not depend on the machine's speed or load."""
+    steps = [0]
+    conn = store._conn()
+    conn.set_progress_handler(lambda: steps.__setitem__(0, steps[0] + 1), 1)
+    try:
+        read()
+    finally:
+        conn.set_progress_handler(None, 1)
+    return steps[0]
+
+
+def test_health_counts_cost_the_same_for_10_and_2000_batches(tmp_path):
+    store = Store(tmp_path / "map.sqlite")
+    for i in range(10):
+        store.put(FrameBatch.model_validate(make_batch(i, f"d{i % 3}", n_objects=3)))
+    small = _vm_steps(store, store.counts)
+    with store.transaction() as tx:  # 1990 more batches, the way Store.put books them
+        for i in range(10, 2000):
+            Store._insert(tx, FrameBatch.model_validate(make_batch(i, f"d{i % 3}", n_objects=3)), "0" * 64, 0.0)
+    assert store.counts() == {"batches": 2000, "objects": 6000, "devices": 3}
+    assert _vm_steps(store, store.counts) == small < 200  # a COUNT(*) over objects would be >= 6000
+    store.close()
+
+
+def test_tracks_are_decimated_evenly_keeping_the_first_and_last_position(tmp_path):
+    store = Store(tmp_path / "map.sqlite")
+    with store.transaction() as tx:
+        for i in range(3000):
+            Store._insert(tx, FrameBatch.model_validate(make_batch(i, n_objects=0)), "0" * 64, 0.0)
+    tracks, cursor = store.tracks(max_points=100)
+    times = [t for t, _, _ in tracks["dev-01"]]
+    assert len(times) == 100 and cursor == 3000
+    assert times[0] == make_batch(0)["time"] and times[-1] == make_batch(2999)["time"]
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    assert max(gaps) < 1.1 * min(gaps) + 0.11  # evenly spread: every ~30th frame
+    seeks = _vm_steps(store, lambda: store.tracks(max_points=100))
+    with store.transaction() as tx:
+        for i in range(3000, 9000):
+            Store._insert(tx, FrameBatch.model_validate(make_batch(i, n_objects=0)), "0" * 64, 0.0)
+    assert _vm_steps(store, lambda: store.tracks(max_points=100)) < 1.5 * seeks  # 3x the rows, not 3x the work
+    recent, _ = store.tracks(after=8990)
+    assert [len(p) for p in recent.values()] == [10]
+    store.close()
