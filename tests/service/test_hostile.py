@@ -37,7 +37,7 @@ def srv(tmp_path_factory):
     with sqlite3.connect(db) as conn:
         stored = set(conn.execute("SELECT device, batch_id FROM batches").fetchall())
         assert stored <= {("dev-a", "dev-a:000000"), ("dev-a", "dev-a:000001"), ("dev-b", "dev-a:000000")}
-        assert conn.execute("SELECT MAX(time), MAX(ABS(alt)), MAX(depth_m) FROM objects").fetchone()[0] < time.time() + 60
+        assert (conn.execute("SELECT MAX(time) FROM objects").fetchone()[0] or 0) < time.time() + 60
 
 
 def assert_responsive(srv, within_s: float = 1.0) -> None:
