@@ -79,6 +79,9 @@ def create_app(db_path: str | Path, synchronous: str = "FULL", access: Access = 
     async def lifespan(app: FastAPI):
         if not access.write_auth:
             log.warning("write authentication is OFF (--no-auth): anyone who reaches the port can post as any device")
+        elif not any(t["role"] == "device" and t["revoked"] is None for t in tokens.listing(store)):
+            log.warning("no device token issued yet: every post will be refused (401); issue one with "
+                        "`dsfec serve token add --db %s --device NAME`", store.path)
         sweeper = asyncio.create_task(_retention(store, access)) if access.retention_days else None
         yield
         if sweeper is not None:
