@@ -69,3 +69,20 @@ def test_the_page_draws_a_large_database_within_its_limits(tmp_path):
     assert "error" not in attrs, attrs
     assert attrs["objects"] == "5000" and attrs["tracks"] == "4" and int(attrs["drawn"]) >= 2
     assert [len(f["geometry"]["coordinates"]) for f in tracks["features"]] == [2000] * 4  # max_points per device
+
+
+def test_reads_behind_a_token_take_it_from_the_url_fragment_and_a_refusal_shows(tmp_path):
+    from dsfec_jax.service import tokens
+    from dsfec_jax.service.app import Access
+    from dsfec_jax.service.store import Store
+
+    store = Store(tmp_path / "closed.sqlite")
+    _, reader = tokens.issue(store, "read")
+    store.close()
+    with LiveServer(tmp_path / "closed.sqlite", access=Access(write_auth=False, open_reads=False)) as srv:
+        assert post(srv.url, make_batch(0, "dev-a", n_objects=2))[0] == 201
+        refused = body_attributes(chromium(srv.url + "/", tmp_path / "p1", "--dump-dom", budget_ms=2000).stdout)
+        allowed = body_attributes(chromium(srv.url + f"/#token={reader}", tmp_path / "p2", "--dump-dom",
+                                           budget_ms=2000).stdout)
+    assert "HTTP 401" in refused["error"] and refused["objects"] == "0"  # said on the page, not a silent blank
+    assert "error" not in allowed and allowed["objects"] == "2" and allowed["tracks"] == "1"

@@ -282,7 +282,7 @@ function drawLegend() {
     rows.push("<h2>Ego tracks</h2>");
     state.tracks.forEach((t, i) => rows.push(
       `<div class="row"><span class="line" style="border-color:${TRACK_COLOURS[i % TRACK_COLOURS.length]}"></span>` +
-      `${escapeHtml(t.device)}<span class="count">${t.positions.length} frame${t.positions.length === 1 ? "" : "s"}</span></div>`));
+      `${escapeHtml(t.device)}<span class="count">${t.positions.length} position${t.positions.length === 1 ? "" : "s"}</span></div>`));
   }
   legend.innerHTML = rows.join("");
   legend.style.display = rows.length ? "" : "none";
