@@ -16,7 +16,7 @@ import pytest
 from dsfec_jax.service import tokens
 from dsfec_jax.service.app import Access
 from dsfec_jax.service.store import Store
-from service_helpers import LAT0, LON0, LiveServer, changed, get, make_batch, post
+from service_helpers import LAT0, LiveServer, changed, get, make_batch, post
 
 BODY_TIMEOUT_S = HEADER_TIMEOUT_S = 1.0
 
