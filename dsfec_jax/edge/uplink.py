@@ -48,7 +48,8 @@ RETRYABLE_4XX = (408, 429)
 class _KeepAlive:
     """One persistent HTTP/1.1 connection to the server, reopened after any failure."""
 
-    def __init__(self, server_url: str, timeout_s: float):
+    def __init__(self, server_url: str, timeout_s: float, token: str | None = None):
+        self.headers = {"Content-Type": "application/json", **({"Authorization": f"Bearer {token}"} if token else {})}
         parts = urllib.parse.urlsplit(server_url)
         if parts.scheme not in ("http", "https") or not parts.hostname:
             raise ValueError(f"server_url: expected http://host[:port] or https://..., got {server_url!r}")
@@ -64,7 +65,7 @@ class _KeepAlive:
             if fresh:
                 self.conn = self.kind(self.host, self.port, timeout=self.timeout_s)
             try:
-                self.conn.request("POST", self.path, body, {"Content-Type": "application/json"})
+                self.conn.request("POST", self.path, body, self.headers)
                 reply = self.conn.getresponse()
                 text = reply.read().decode("utf-8", "replace")
             except (OSError, HTTPException) as e:
@@ -94,14 +95,16 @@ class Uplink:
     counts: sent (201), duplicate (200), retried (failed attempts kept for a retry), rejected
     (4xx: in rejected/), conflicts (409: in conflicts/). `observer(status, seconds)` (optional) is
     called after every POST attempt with the HTTP status (None for a network error) and its time.
+    `token`: the device's write token, sent as `Authorization: Bearer <token>`.
     One Uplink per device loop and queue_dir: it is not thread-safe, and two on one folder would
     post the same files twice (harmless at the server, but counted twice).
     """
 
     def __init__(self, server_url: str, queue_dir: str | Path, timeout_s: float = 5.0, backoff_s: float = 0.25,
                  max_backoff_s: float = 5.0, observer: Callable[[int | None, float], None] | None = None,
-                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep):
-        self._http = _KeepAlive(server_url, timeout_s)
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                 token: str | None = None):
+        self._http = _KeepAlive(server_url, timeout_s, token)
         self.url = self._http.url
         self.queue_dir = Path(queue_dir)
         self.queue_dir.mkdir(parents=True, exist_ok=True)
