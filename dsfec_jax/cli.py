@@ -520,8 +520,15 @@ def run_bench(args) -> int:
     return 0
 
 
+LIGHT_COMMANDS = ("serve",)  # run no XLA: the map service starts light and gives memory back
+
+
 def main(argv=None) -> int:
-    args = parse(argv)
+    args = parse(argv)  # --help and argument errors exit here, before anything heavy
+    if args.command not in LIGHT_COMMANDS:
+        from .core.host_memory import prepare_xla_process
+
+        prepare_xla_process()  # XLA's settings first: may restart this command (core/host_memory.py)
     if args.command in EDGE_COMMANDS:
         from . import cli_edge
 

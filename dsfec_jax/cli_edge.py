@@ -3,7 +3,7 @@
     dsfec edge  --out runs/edge/drive0 [--drive-frames 300 --seed 0]            # the synthetic test drive
     dsfec edge  --frames DIR --gps gps.csv --out OUT [--server http://127.0.0.1:8000] [--device cam-01]
                 [--token-file PATH]                                           # or $DSFEC_MAP_TOKEN
-    dsfec serve --db runs/map.sqlite [--host 127.0.0.1 --port 8000]
+    dsfec serve --db runs/map.sqlite [--host 127.0.0.1 --port 8000]          # + `dsfec serve token add ...`
     dsfec depth train --run-dir runs/depth/monodepth_street --steps 1500 --frames 2000
     dsfec depth eval  [--weights PATH] --frames 50
 
@@ -29,6 +29,7 @@ import sys
 from pathlib import Path
 
 from .argtypes import command_line, positive_int
+from .service.options import add_arguments as add_service_arguments
 
 EDGE_COMMANDS = ("edge", "serve", "depth")
 TOKEN_ENV = "DSFEC_MAP_TOKEN"
@@ -61,10 +62,8 @@ def add_commands(sub) -> None:
     e.add_argument("--drive-frames", type=positive_int, default=300, help="synthetic drive: frames (10 Hz)")
     e.add_argument("--drive", type=int, default=0, help="synthetic drive: index in the test split")
     e.add_argument("--seed", type=int, default=0)
-    s = sub.add_parser("serve", help="the map service: POST /detections, GET /objects, GET / (map page)")
-    s.add_argument("--db", required=True, help="SQLite database file (created if missing)")
-    s.add_argument("--host", default="127.0.0.1")
-    s.add_argument("--port", type=int, default=8000)
+    s = sub.add_parser("serve", help="the map service: POST /detections, GET /objects, GET / (map page); token admin")
+    add_service_arguments(s)
     d = sub.add_parser("depth", help="train or evaluate the monodepth network on the street benchmark")
     d.add_argument("action", choices=("train", "eval", "ship"))
     d.add_argument("--run-dir", default=None, help="train: the run directory (resumed if it exists); ship: the finished run")
@@ -86,10 +85,9 @@ def main(args) -> int:
 
         threads.pin(args.threads)  # before XLA starts
     if args.command == "serve":
-        from .service.server import serve
+        from .service.options import run
 
-        serve(args.db, args.host, args.port)
-        return 0
+        return run(args, "dsfec serve")
     if args.command == "depth":
         return run_depth(args)
     return run_edge_command(args)

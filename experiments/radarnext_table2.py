@@ -9,6 +9,11 @@ gives FPS on an RTX A4000 and a Jetson AGX Orin.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 from dsfec_jax.models.radarnext.paper import TABLE2
 from search import grid
 

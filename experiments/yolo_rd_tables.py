@@ -2,6 +2,7 @@
 
     python -m experiments.yolo_rd_tables table3|table4|table5|table6 [--profile quick|paper|smoke]
                                          [--seeds 2] [--out RUN_DIR] [--backend ray]
+                                         [--record DIR]
 
 Table 3: YOLOv8 n/s/m/l and YOLOv8n-Adapter; Table 4: the Adapter on YOLOv8n, YOLOv9t, YOLOv10n;
 Table 5: input representations (backbone heat/gray x adapter none/gray/heat); Table 6: fusion
@@ -19,16 +20,28 @@ mean ± sd over seeds, and the bootstrap draws seeds too, so training noise wide
 journal from before the matches were kept gains them without training: `python -m search.rescore
 RUN_DIR`. The paper's numbers are RADDet's (real data); ours are the synthetic benchmark's, so only
 orderings and gaps compare.
+
+What ships: RUN_DIR is scratch (runs/ is not in the repository), so each run also writes the
+table's record to --record (default experiments/records/yolo_rd/TABLE_PROFILE.json): the command,
+every row's trials with their seeds, figures, costs, wall/CPU time and environment (versions), the
+bootstrap verdicts and the markdown. Match tables stay in the journal (they are large).
 """
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import dataclasses
+import shlex
 import statistics
 import sys
 from pathlib import Path
 
 from dsfec_jax.core import atomic
+from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.models.yolo_rd import paper
 from dsfec_jax.models.yolo_rd.variants import (TABLE5_ROWS, TABLE6_OPTIONS, VARIANTS, fusion_variant,
                                                representation_variant)
@@ -41,6 +54,9 @@ from search.significance import summary as significance_note
 BASE = "yolov8n"
 UNCOMPARED = ("name", "notes")  # config fields that do not change the network or its training
 DEFAULT_OUT = "runs/experiments/yolo_rd"
+DEFAULT_RECORD_DIR = "experiments/records/yolo_rd"
+TRIAL_FIELDS = ("seed", "status", "error", "metrics", "costs", "recipe", "data", "key", "wall_s", "cpu_s",
+                "environment")  # what a shipped record keeps of each journal record
 
 
 def overrides_of(cfg) -> dict:
@@ -158,6 +174,23 @@ def markdown(table: str, records: list[dict]) -> str:
     return "\n".join(lines) + "\n\n" + note + "\n"
 
 
+def table_record(table: str, records: list[dict], command: str, profile: str) -> dict:
+    """The shipped record of one table: each row's trials (seeds, figures, costs, time, versions),
+    the bootstrap verdicts and the markdown, so the README's figures are traceable without runs/."""
+    rows = table_rows(table)
+    by_key = {}
+    for r in records:
+        by_key.setdefault(_row_key(r["overrides"]), []).append(r)
+    found = [by_key.get(_row_key(overrides_of(cfg)), []) for _, cfg, _ in rows]
+    sig = _bootstrap(table, rows, [[r for r in recs if r["status"] == "ok"] for recs in found])
+    return {"table": table, "command": command, "profile": profile,
+            "complete": all(any(r["status"] == "ok" for r in recs) for recs in found),
+            "rows": [{"label": label, "overrides": overrides_of(cfg), "paper_raddet": jsonable(ref),
+                      "trials": [{k: r[k] for k in TRIAL_FIELDS if k in r} for r in recs]}
+                     for (label, cfg, ref), recs in zip(rows, found)],
+            "bootstrap": jsonable(sig), "markdown": markdown(table, records)}
+
+
 def _row_key(overrides: dict) -> str:
     return repr(sorted((k, tuple(v) if isinstance(v, list) else v) for k, v in overrides.items()))
 
@@ -169,6 +202,8 @@ def main(argv=None) -> int:
     table, rest = argv[0], argv[1:]
     rows = table_rows(table)
     p = parser(f"python -m experiments.yolo_rd_tables {table}", __doc__, base=BASE)
+    p.add_argument("--record", default=DEFAULT_RECORD_DIR,
+                   help=f"where the table's shipped record goes (default {DEFAULT_RECORD_DIR})")
     args = parse(p, rest)
     args.out = args.out or DEFAULT_OUT
 
@@ -182,9 +217,14 @@ def main(argv=None) -> int:
         return out
 
     run_search(args, f"yolo_rd_{table}", build, f"YOLO-RD {table} (synthetic RD benchmark)", BASE)
-    text = markdown(table, Journal(args.out).records())
+    records = Journal(args.out).records()
+    text = markdown(table, records)
     atomic.write_text(Path(args.out) / f"{table}.md", f"### {table} ({args.profile} profile)\n\n{text}")
+    command = f"python -m experiments.yolo_rd_tables {table} " + " ".join(shlex.quote(a) for a in rest)
+    record_path = Path(args.record) / f"{table}_{args.profile}.json"
+    atomic.write_json(record_path, table_record(table, records, command.strip(), args.profile))
     print(text)
+    print(f"record: {record_path}")
     return 0
 
 

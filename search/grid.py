@@ -8,6 +8,11 @@ python -m search.grid --base radarnext_mdfen --axis "dcn_positions=1|3|5|2|4|1,2
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 from .cli import parse, parser, run_search
 from .space import candidates, parse_axis
 

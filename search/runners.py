@@ -4,12 +4,12 @@ the trial in flight."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from contextlib import contextmanager
+import contextlib
 from pathlib import Path
 from typing import Callable
 
 from .journal import Journal
+from .ray_session import ray_session
 from .report import headline
 from .trial import run_trial
 
@@ -38,41 +38,10 @@ def run_local(trials: list[dict], run_dir: str | Path, retry_failed: bool = Fals
     return journal.records()
 
 
-def ray_environment(address: str | None, environ: Mapping[str, str]) -> dict[str, str]:
-    """Variables to add to `environ` for ray.init. Token authentication is switched off only for
-    the private local Ray started here (address None), never for a cluster at `address` (anyone
-    who can reach it could run code on it); a value the user set is never overridden."""
-    defaults = {"RAY_USAGE_STATS_ENABLED": "0"}
-    if address is None:
-        defaults["RAY_AUTH_MODE"] = "disabled"
-    return {k: v for k, v in defaults.items() if k not in environ}
-
-
-@contextmanager
-def _environ(extra: dict[str, str]):
-    """os.environ plus `extra` for the block, so a later run in this process (say, attaching
-    to a remote cluster) does not inherit the local run's settings."""
-    import os
-
-    os.environ.update(extra)
-    try:
-        yield
-    finally:
-        for key in extra:
-            os.environ.pop(key, None)
-
-
 def run_ray(trials: list[dict], run_dir: str | Path, address: str | None = None, retry_failed: bool = False,
             cpus_per_trial: float = 1.0, log: Callable[[str], None] = print) -> list[dict]:
     """Run the pending trials as Ray Tune trials (a local Ray started here, or the cluster at
     `address`); each finished trial's record is appended to the journal as it arrives."""
-    import os
-
-    with _environ(ray_environment(address, os.environ)):
-        return _run_ray(trials, run_dir, address, retry_failed, cpus_per_trial, log)
-
-
-def _run_ray(trials, run_dir, address, retry_failed, cpus_per_trial, log) -> list[dict]:
     import json
     import os
 
@@ -96,21 +65,14 @@ def _run_ray(trials, run_dir, address, retry_failed, cpus_per_trial, log) -> lis
                 journal.append(record)
                 log(f"    {record['label']} (seed {record['seed']}): {record['status']}")
 
-    started = not ray.is_initialized()
-    if started:
-        # "local": always a fresh private Ray, never one found through RAY_ADDRESS (auth is off for it)
-        ray.init(address=address or "local", include_dashboard=False, log_to_driver=False, ignore_reinit_error=True,
-                 **({} if address else {"num_cpus": os.cpu_count()}))
-    try:
+    # the Ray this process already runs, or one started here (search/ray_session.py)
+    with contextlib.nullcontext() if ray.is_initialized() else ray_session(address, os.cpu_count()):
         trainable = tune.with_resources(_ray_trainable, {"cpu": cpus_per_trial})
         tuner = tune.Tuner(trainable,
                            param_space={"trial": tune.grid_search(todo), "run_dir": str(run_dir)},
                            run_config=tune.RunConfig(name="search", storage_path=str(run_dir / "ray"),
                                                      callbacks=[JournalCallback()], verbose=0))
         tuner.fit()
-    finally:
-        if started:
-            ray.shutdown()
     return journal.records()
 
 

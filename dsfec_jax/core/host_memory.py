@@ -22,10 +22,14 @@ next call's mmap waits on. Two settings answer it:
 
 glibc reads its tunables only at start-up, so the settings can only come from the environment
 the process starts with. `relaunch_with_host_settings` execs the same command line again with
-GLIBC_TUNABLES extended; `dsfec_jax/__init__.py` calls `relaunch_project_command` when the
-process runs one of the project's commands (`dsfec ...`, `python -m dsfec_jax... | search... |
-experiments...`), which then turns async dispatch off where the heap keeps buffers. So library
-users and the test runner are never re-executed and keep JAX's defaults. A tunable the user
+GLIBC_TUNABLES extended. The commands that run XLA call `prepare_xla_process` when they start
+(each such module in an `if __name__ == "__main__"` guard above its imports, so the first
+process execs before it loads JAX; `dsfec` after parsing its arguments, for every subcommand
+but `serve`), which relaunches where the process was started as that command
+(`dsfec ...`, `python -m dsfec_jax... | search... | experiments...`) and then turns async
+dispatch off where the heap keeps buffers. Nothing happens at import: the map service (a
+long-lived server that must give memory back and start fast), `dsfec --help`, library users and
+the test runner are never re-executed and keep the defaults. A tunable the user
 already gave stands (and where it is one of KEEP_BUFFERS, dispatch stays asynchronous).
 DSFEC_HUGEPAGES=0 leaves all of it at the defaults. Glibc >= 2.35 on Linux; huge pages only
 with THP not set to 'never'. jax is imported only to set its dispatch, before XLA starts.
@@ -121,9 +125,11 @@ def relaunch_with_host_settings() -> None:
     os.execve(sys.executable, [sys.executable, *sys.orig_argv[1:]], {**os.environ, "GLIBC_TUNABLES": value})
 
 
-def relaunch_project_command() -> None:
-    """For one of the project's commands: `relaunch_with_host_settings`, then (in the process that
-    goes on) async dispatch off where the heap keeps buffers."""
+def prepare_xla_process() -> None:
+    """First thing in a command that runs XLA: where the process was started as one of the
+    project's commands (`is_project_command`), `relaunch_with_host_settings`, then (in the
+    process that goes on) async dispatch off where the heap keeps buffers. Elsewhere (a library
+    user or the test runner calling the command's main) it does nothing."""
     if is_project_command(sys.orig_argv):
         relaunch_with_host_settings()
         if heap_keeps_buffers():
@@ -164,8 +170,9 @@ def keeps_buffers() -> bool:
 
 
 if __name__ == "__main__":
-    # `python -m dsfec_jax.core.host_memory --probe ...`: prints what the (relaunched) process
-    # started with and exits 3, for tests/core/test_host_memory.py
+    # `python -m dsfec_jax.core.host_memory --probe ...`: a command that runs XLA; prints what
+    # the (relaunched) process started with and exits 3, for tests/core/test_host_memory.py
+    prepare_xla_process()
     print(os.environ.get("GLIBC_TUNABLES", ""))
     print(sys.argv[1:])
     import jax

@@ -4,7 +4,8 @@
     python -m dsfec_jax.edge.loadtest --devices 8 --seconds 20 --kill-at 8 --out runs/loadtest
 
 It lives on the devices' side of the wire: it starts the server as a separate process
-(`python -m dsfec_jax.service`, uvicorn, a fresh database on a free localhost port), talks to it
+(`python -m dsfec_jax.service`, uvicorn, a fresh database on a free localhost port, write tokens
+on: one device token per simulated device, issued with `python -m dsfec_jax.service token add`), talks to it
 only over HTTP through edge.uplink.Uplink, and reads its database file with sqlite3 afterwards; it
 imports nothing of service/ (tests/test_architecture.py: edge and service meet only over HTTP).
 
@@ -47,6 +48,7 @@ import sys
 import tempfile
 import threading
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -114,7 +116,8 @@ class Device:
 class DeviceRun(threading.Thread):
     """Generates and sends frames until `stop_at` (monotonic), then flushes its queue."""
 
-    def __init__(self, device: Device, url: str, queue_dir: Path, rate: float, stop_at: float, flush_s: float):
+    def __init__(self, device: Device, url: str, queue_dir: Path, rate: float, stop_at: float, flush_s: float,
+                 token: str | None = None):
         super().__init__(name=device.name, daemon=True)
         self.device, self.rate, self.stop_at, self.flush_s = device, rate, stop_at, flush_s
         self.latencies: list[float] = []      # seconds of the POSTs that delivered (200/201)
@@ -124,7 +127,8 @@ class DeviceRun(threading.Thread):
         self.max_queued = 0
         self.generated: dict[str, dict] = {}  # batch_id -> batch
         self.flushed = False
-        self.uplink = Uplink(url, queue_dir, timeout_s=5.0, backoff_s=0.1, max_backoff_s=1.0, observer=self._observe)
+        self.uplink = Uplink(url, queue_dir, timeout_s=5.0, backoff_s=0.1, max_backoff_s=1.0, observer=self._observe,
+                             token=token)
 
     def _observe(self, status, seconds):
         self.post_s += seconds
@@ -153,6 +157,17 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def issue_tokens(db: Path, names: list[str]) -> dict[str, str]:
+    """One device token per simulated device, issued by the service's own admin command (over
+    the database file, before the server starts): device name -> token."""
+    cmd = [sys.executable, "-m", "dsfec_jax.service", "token", "add", "--db", str(db), "--json",
+           *(arg for name in names for arg in ("--device", name))]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    if out.returncode != 0:
+        raise RuntimeError(f"issuing device tokens failed: {out.stderr.strip()}")
+    return {item["device"]: item["token"] for item in json.loads(out.stdout)}
+
+
 def start_server(db: Path, port: int, log: Path, synchronous: str = "FULL") -> subprocess.Popen:
     cmd = [sys.executable, "-m", "dsfec_jax.service", "--db", str(db), "--port", str(port), "--log-level", "warning",
            "--synchronous", synchronous]
@@ -173,6 +188,16 @@ def wait_healthy(url: str, proc: subprocess.Popen, timeout_s: float = 30.0) -> f
         except OSError:
             time.sleep(0.02)
     raise RuntimeError(f"{url}/health did not answer within {timeout_s} s")
+
+
+def unauthenticated_post_status(url: str) -> int:
+    """The server's answer to a post without a token: 401 when write tokens are on, as they must be."""
+    req = urllib.request.Request(url + "/detections", data=b"{}", method="POST", headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=5.0) as reply:
+            return reply.status
+    except urllib.error.HTTPError as e:
+        return e.code
 
 
 def cpu_seconds(pid: int) -> float | None:
@@ -279,12 +304,15 @@ def run(devices: int, seconds: float, kill_at: float | None, pause_s: float, rat
     db, port = workdir / "map.sqlite", free_port()
     url = f"http://127.0.0.1:{port}"
     log = workdir / "server.log"
+    fleet = [Device(i, seed, objects) for i in range(devices)]
+    device_tokens = issue_tokens(db, [d.name for d in fleet])
     server = {"url": url, "proc": start_server(db, port, log, synchronous)}
     try:
         startup = wait_healthy(url, server["proc"])
+        no_token_status = unauthenticated_post_status(url)
         t0 = time.monotonic()
-        runs = [DeviceRun(Device(i, seed, objects), url, workdir / "queues" / f"dev-{i:02d}", rate, t0 + seconds,
-                          flush_s) for i in range(devices)]
+        runs = [DeviceRun(d, url, workdir / "queues" / d.name, rate, t0 + seconds, flush_s, device_tokens[d.name])
+                for d in fleet]
         killer = Killer(server, kill_at, pause_s, t0, lambda: start_server(db, port, log, synchronous)) \
             if kill_at is not None else None
         for r in runs:
@@ -307,7 +335,9 @@ def run(devices: int, seconds: float, kill_at: float | None, pause_s: float, rat
     checks = check_database(db, generated)
     checks["queues_empty"] = all(r.flushed and not r.uplink.pending() for r in runs)
     checks["rejected_or_conflicts"] = counts["rejected"] + counts["conflicts"]
-    checks["passed"] = checks["exactly_once"] and checks["queues_empty"] and checks["rejected_or_conflicts"] == 0
+    checks["post_without_token_status"] = no_token_status
+    checks["passed"] = (checks["exactly_once"] and checks["queues_empty"] and checks["rejected_or_conflicts"] == 0
+                        and no_token_status == 401)
     return {
         "figures": {"devices": devices, "load_seconds": seconds, "rate_per_device_hz": rate or "closed loop",
                     "synchronous": synchronous,

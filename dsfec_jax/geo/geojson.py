@@ -3,7 +3,8 @@ the drive outputs (export.py) and the map service alike.
 
 - `object_features(batch)`: one Feature per placed object of a frame batch (the exchange format,
   issue25 notes): geometry Point [lon, lat, alt] (RFC 7946 order: longitude first); properties
-  class, score, time (UNIX s), time_iso (UTC ISO 8601 with milliseconds and "Z"), depth_m, x_m,
+  class, score, time (UNIX s), time_iso (UTC ISO 8601 with milliseconds and "Z"; null when the
+  time is past year 9999 or otherwise no date), depth_m, x_m,
   device, frame, box.
 - `track_features(egos)`: one Feature per device from {device: [(time, lon, lat), ...]}: geometry
   LineString of [lon, lat] in time order, properties device. A LineString needs two or more
@@ -26,9 +27,14 @@ def _finite(value, where: str) -> float:
     return float(value)
 
 
-def time_iso(t: float) -> str:
-    """UNIX seconds -> '2024-05-01T12:00:00.250Z' (UTC)."""
-    stamp = datetime.datetime.fromtimestamp(float(t), datetime.timezone.utc)
+def time_iso(t: float) -> str | None:
+    """UNIX seconds -> '2024-05-01T12:00:00.250Z' (UTC); None for a time no calendar date holds
+    (a Unix time in milliseconds stored by an older service: the feature is still served, and
+    its "time" still says what was stored)."""
+    try:
+        stamp = datetime.datetime.fromtimestamp(float(t), datetime.timezone.utc)
+    except (OverflowError, OSError, ValueError):
+        return None
     return stamp.isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 

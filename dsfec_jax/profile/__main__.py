@@ -9,6 +9,11 @@ paper's formula). --threads must be handled before XLA starts (first jax computa
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from ..core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import json
 import shlex

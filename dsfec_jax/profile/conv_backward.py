@@ -10,6 +10,11 @@ it to check them on another CPU. Each form is jitted alone and timed in steady s
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from ..core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import shlex
 import sys

@@ -32,6 +32,11 @@ formulation switch measured before against after in one run.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from ..core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import dataclasses
 import functools
 import itertools

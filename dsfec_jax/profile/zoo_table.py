@@ -9,6 +9,11 @@ README markers and from its own record file: `records/zoo.json`, `records/zoo_rd
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from ..core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import json
 import re
 from pathlib import Path

@@ -3,7 +3,7 @@
     [--latency-table FILE] [--objective params|gflops|latency_ms]
     [--seed 0] [--sampling uniform|sandwich] [--run-dir runs/nas/SPACE] [--standalone 5] [--spread 3]
     [--spread-by score|params|gflops|latency_ms] [--backend local|ray [--address ADDR] [--workers N]]
-    [--register yolov8n_adapter_search]
+    [--register yolov8n_adapter_search] [--record search/nas/records/ranking_SPACE.json]
 
 Trains the space's weight-sharing supernet by SPOS (resumable), searches it under the limits
 (the paper's evolution, or Optuna's NSGA-II), and writes RUN_DIR/report.md with the generation
@@ -11,12 +11,18 @@ table, the top subnets and Pareto plots (pareto_params.png, pareto_gflops.png). 
 trains the top K subnets from scratch (and --spread N more across the ranking) with the family's
 recipe, in RUN_DIR/standalone, and adds the ranking study (Kendall tau, inherited against
 stand-alone mAP) to the report and RUN_DIR/ranking.json; --register then takes the best
-stand-alone subnet. --backend ray scores each generation's subnets on N Ray actors (the supernet
+stand-alone subnet, and --record FILE keeps the study with the run's command, seed and versions
+(a record to ship beside the README's figures: RUN_DIR is scratch). --backend ray scores each generation's subnets on N Ray actors (the supernet
 still trains here first) and runs the stand-alone trainings as Ray Tune trials. Run the same
 command again to resume a killed run.
 """
 
 from __future__ import annotations
+
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
 
 import argparse
 import shlex
@@ -49,6 +55,9 @@ def main(argv=None) -> int:
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--register", default=None, metavar="NAME",
                    help="register the best subnet as zoo model NAME (e.g. yolov8n_adapter_search: models/yolo_rd/searched.json)")
+    p.add_argument("--record", default=None, metavar="FILE",
+                   help="with --standalone/--spread: also write the ranking study with the run's command, seed and "
+                        "environment to FILE (e.g. search/nas/records/ranking_SPACE.json, to ship)")
     p.add_argument("--standalone", type=int, default=0, metavar="K",
                    help="train the top K subnets stand-alone (the family's recipe of this profile)")
     p.add_argument("--spread", type=int, default=0, metavar="N",
@@ -64,6 +73,8 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.standalone < 0 or args.spread < 0:
         p.error("--standalone and --spread take counts >= 0")
+    if args.record and not (args.standalone or args.spread):
+        p.error("--record keeps the ranking study: it goes with --standalone K or --spread N")
     if args.workers is not None and (args.backend != "ray" or args.workers < 1):
         p.error("--workers N (N >= 1) goes with --backend ray")
     limits = {k: v for k, v in (("params", args.max_params), ("gflops", args.max_gflops),
@@ -73,7 +84,7 @@ def main(argv=None) -> int:
                      command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress,
                      register_as=args.register, latency_path=args.latency_table, standalone=args.standalone,
                      spread=args.spread, spread_by=args.spread_by, backend=args.backend, address=args.address,
-                     workers=args.workers, sampling=args.sampling)
+                     workers=args.workers, sampling=args.sampling, record_path=args.record)
     print(f"report: {report}")
     return 0
 

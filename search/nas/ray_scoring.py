@@ -36,7 +36,7 @@ from typing import Callable, Sequence
 
 from dsfec_jax.core.threads import available_cpus, eigen_threads, pin
 
-from ..runners import _environ, ray_environment
+from ..ray_session import ray_session
 
 DEFAULT_WORKERS = 2  # where the cluster reports no CPUs
 
@@ -128,8 +128,8 @@ class RayScorer:
             raise ValueError(f"workers {workers}, cpus_per_worker {cpus_per_worker}: both must be >= 1")
         self.ray, self.factory, self.workers, self.address = ray, factory, workers, address
         self.cpus_per_worker, self.max_workers, self.log = cpus_per_worker, max_workers, log
-        self.actors, self.pool, self.started, self.closed = [], None, False, False
-        self._env = contextlib.ExitStack()
+        self.actors, self.pool, self.closed = [], None, False
+        self._session = contextlib.ExitStack()
 
     def _start(self) -> None:
         from ray.util import ActorPool
@@ -137,12 +137,8 @@ class RayScorer:
         ray, address, per = self.ray, self.address, self.cpus_per_worker
         try:
             if not ray.is_initialized():
-                self._env.enter_context(_environ(ray_environment(address, os.environ)))
-                # "local": always a fresh private Ray, never one found through RAY_ADDRESS (auth is off for it),
-                # with as many CPUs as this process may use (a `taskset` limit holds for the actors too)
-                ray.init(address=address or "local", include_dashboard=False, log_to_driver=False,
-                         ignore_reinit_error=True, **({} if address else {"num_cpus": len(available_cpus())}))
-                self.started = True
+                # a local Ray with as many CPUs as this process may use (a `taskset` limit holds for the actors too)
+                self._session.enter_context(ray_session(address, len(available_cpus())))
             cluster = int(ray.cluster_resources().get("CPU", 0))
             n = self.workers or (max(1, cluster // per) if cluster else DEFAULT_WORKERS)
             n = min(n, self.max_workers) if self.max_workers else n
@@ -182,10 +178,7 @@ class RayScorer:
         for a in self.actors:
             self.ray.kill(a)
         self.actors, self.pool, self.closed = [], None, True
-        if self.started:
-            self.ray.shutdown()
-            self.started = False
-        self._env.close()
+        self._session.close()  # shuts down the Ray started here, if any
 
     def __enter__(self) -> "RayScorer":
         return self

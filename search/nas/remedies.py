@@ -26,6 +26,11 @@ the other's) and RUN_DIR/remedies.md (the table of both, with the run's own stud
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
 import argparse
 import dataclasses
 import json

@@ -172,10 +172,12 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
             progress: bool = True, register_as: str | None = None, latency_path: str | None = None,
             standalone: int = 0, spread: int = 0, spread_by: str = "score", backend: str = "local",
             address: str | None = None, workers: int | None = None, sampling: str = "uniform",
-            log: Callable[[str], None] = print) -> Path:
+            record_path: str | Path | None = None, log: Callable[[str], None] = print) -> Path:
     """Supernet, search, reports; with `standalone` / `spread`, the top subnets (and `spread` more
     across the ranking) trained stand-alone and the ranking study (search.nas.standalone); `register_as`
-    then registers the best stand-alone subnet instead of the best inherited one. `backend` "ray":
+    then registers the best stand-alone subnet instead of the best inherited one, and `record_path`
+    receives the study with the run's command, seed and environment (a record to ship: RUN_DIR is
+    scratch). `backend` "ray":
     the search's subnets are scored by `workers` Ray actors (search.nas.ray_scoring; the local Ray
     started here or the cluster at `address`) and the stand-alone trainings run as Ray Tune trials."""
     if strategy not in ("evolution", "nsga2"):
@@ -232,6 +234,9 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
         study = ranking_study(chosen, trained, metric, oneshot_s, len(records))
         atomic.write_json(run_dir / "ranking.json", study)
         meta["wall_s"] = round(time.perf_counter() - t0, 1)
+        if record_path is not None:
+            atomic.write_json(record_path, {**meta, "ranking": study})
+            log(f"ranking study record: {record_path}")
     report = write_report(run_dir, header, progress_text, records, metric, references, meta,
                           ranking_markdown(study) if study else None)
     if register_as:

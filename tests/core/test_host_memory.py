@@ -1,9 +1,14 @@
-"""The project's commands restart once with glibc tunables and async dispatch off (core/host_memory.py);
-library users and the test runner are never re-executed."""
+"""The commands that run XLA restart once with glibc tunables and async dispatch off
+(core/host_memory.py); the map service, `dsfec --help`, library users and the test runner are never
+re-executed, and nothing happens at import."""
 
+import ast
 import os
+import socket
 import subprocess
 import sys
+import time
+import urllib.request
 from pathlib import Path
 
 import pytest
@@ -92,3 +97,132 @@ def test_a_project_command_restarts_with_the_settings_and_its_arguments():
     assert mine.returncode == 3 and mine.stdout.split("\n")[2] == "True", mine.stderr
     off = run({hm.OPT_OUT: "0"})
     assert off.returncode == 3 and off.stdout.split("\n")[0] == "" and off.stdout.split("\n")[2] == "True"
+
+
+ROOT = Path(__file__).resolve().parents[2]
+# the entry points (`if __name__ == "__main__"`) that run no XLA and so keep glibc's and JAX's defaults
+LIGHT_ENTRY_POINTS = {
+    "dsfec_jax/service/__main__.py",  # the map service
+    "dsfec_jax/edge/loadtest.py",  # HTTP clients against a service it starts
+    "dsfec_jax/data/__main__.py", "dsfec_jax/data/camera/street/__main__.py",  # numpy data tools
+    "dsfec_jax/data/points/synthetic/__main__.py", "dsfec_jax/data/rd/synthetic/__main__.py",
+    "dsfec_jax/metrics/nuscenes.py", "dsfec_jax/metrics/voc.py",  # numpy scorers of files
+    "search/report.py", "search/compare.py", "experiments/radarnext_accuracy.py",  # read records, write reports
+}
+
+PREPARED_ELSEWHERE = {
+    "dsfec_jax/cli.py",  # dsfec: main() prepares every subcommand but `serve`, after parsing (the next test)
+    "dsfec_jax/core/host_memory.py",  # the probe: its own stdlib-only module, prepared in its __main__ block
+}
+
+
+def _main_guards(tree: ast.Module) -> list[int]:
+    """Indices in the module's body of its `if __name__ == "__main__"` blocks."""
+    return [i for i, node in enumerate(tree.body) if isinstance(node, ast.If) and "__main__" in ast.unparse(node.test)]
+
+
+def _first_statement(tree: ast.Module) -> int:
+    """Index of the module's first statement after its docstring and `from __future__` imports."""
+    i = int(isinstance(tree.body[0], ast.Expr) and isinstance(tree.body[0].value, ast.Constant))
+    while isinstance(tree.body[i], ast.ImportFrom) and tree.body[i].module == "__future__":
+        i += 1
+    return i
+
+
+def test_every_entry_point_that_runs_xla_prepares_its_process_before_its_imports():
+    """The relaunch is no longer at the package's import: each entry point that runs XLA calls
+    prepare_xla_process in a `__main__` guard above all its other statements (so the first
+    process execs before it loads JAX), and every other entry point is listed as light."""
+    heavy, light = {}, set()
+    for path in sorted(p for d in ("dsfec_jax", "search", "experiments") for p in (ROOT / d).rglob("*.py")):
+        tree = ast.parse(path.read_text())
+        guards = _main_guards(tree)
+        if not guards:
+            continue
+        name = path.relative_to(ROOT).as_posix()
+        if name in PREPARED_ELSEWHERE:
+            continue
+        if name in LIGHT_ENTRY_POINTS:
+            light.add(name)
+            assert "prepare_xla_process" not in ast.unparse(tree), name
+        else:
+            heavy[name] = guards[0] == _first_statement(tree) and ast.unparse(tree.body[guards[0]]).endswith(
+                "prepare_xla_process()")
+    assert light == LIGHT_ENTRY_POINTS  # the list names no module that is gone
+    assert len(heavy) >= 20 and all(heavy.values()), [name for name, ok in heavy.items() if not ok]
+
+
+class _Prepared(Exception):
+    pass
+
+
+def test_dsfec_prepares_every_subcommand_but_serve_and_only_after_parsing(monkeypatch, tmp_path, capsys):
+    from dsfec_jax import cli, cli_edge
+
+    def prepared():
+        raise _Prepared
+
+    monkeypatch.setattr(hm, "prepare_xla_process", prepared)
+    monkeypatch.setattr(cli_edge, "main", lambda args: 0)  # `serve` would serve forever
+    for argv in (["eval", "--model", "dsfec_s"], ["train", "--model", "dsfec_s", "--run-dir", str(tmp_path)],
+                 ["edge", "--out", str(tmp_path)], ["bench"], ["depth", "eval"]):
+        with pytest.raises(_Prepared):
+            cli.main(argv)
+    assert cli.main(["serve", "--db", str(tmp_path / "map.db")]) == 0
+    for argv in (["--help"], ["train", "--help"], ["train", "--no-such-flag"]):
+        with pytest.raises(SystemExit):
+            cli.main(argv)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _start_service(command: list[str], tmp_path: Path, name: str) -> tuple[subprocess.Popen, int, Path]:
+    port = _free_port()
+    env = {k: v for k, v in os.environ.items() if k not in ("GLIBC_TUNABLES", hm.OPT_OUT)}
+    env["PYTHONPROFILEIMPORTTIME"] = "1"  # the process reports every module it imports on stderr
+    log = tmp_path / f"{name}.imports"
+    with open(log, "w") as err:
+        proc = subprocess.Popen([*command, "--db", str(tmp_path / f"{name}.db"), "--port", str(port)], env=env,
+                                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=err)
+    return proc, port, log
+
+
+def _wait_until_serving(proc: subprocess.Popen, port: int) -> None:
+    deadline = time.monotonic() + 60
+    while True:
+        assert proc.poll() is None, f"the service exited with {proc.returncode}"
+        try:
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2).read()
+            return
+        except OSError:
+            assert time.monotonic() < deadline, "the service did not answer /health within 60 s"
+            time.sleep(0.05)
+
+
+def test_the_map_service_process_starts_light(tmp_path):
+    """`python -m dsfec_jax.service` and `dsfec serve`, started as a user would, serving: their
+    process was not restarted with glibc's tunables (its environment), imported no JAX (its own
+    import log) and has no XLA library mapped (/proc/PID/maps)."""
+    dsfec = Path(sys.executable).with_name("dsfec")
+    if not dsfec.exists():
+        pytest.skip(f"no dsfec console script beside {sys.executable}")
+    commands = {"module": [sys.executable, "-m", "dsfec_jax.service"], "cli": [str(dsfec), "serve"]}
+    started = {name: _start_service(command, tmp_path, name) for name, command in commands.items()}
+    try:
+        for name, (proc, port, log) in started.items():
+            _wait_until_serving(proc, port)
+            environ = Path(f"/proc/{proc.pid}/environ").read_bytes().split(b"\0")
+            assert not any(item.startswith(b"GLIBC_TUNABLES=") for item in environ), name
+            imported = {line.rsplit("|", 1)[-1].strip() for line in log.read_text().splitlines() if "|" in line}
+            assert "dsfec_jax.service.server" in imported and "uvicorn" in imported, name  # the log is the server's
+            assert not {"jax", "jaxlib", "flax"} & imported, (name, sorted({"jax", "jaxlib", "flax"} & imported))
+            maps = Path(f"/proc/{proc.pid}/maps").read_text()
+            assert "jaxlib" not in maps and "xla_extension" not in maps, name
+    finally:
+        for proc, _, _ in started.values():
+            proc.terminate()
+            proc.wait(30)

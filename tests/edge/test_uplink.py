@@ -20,7 +20,7 @@ import uvicorn
 from edge_fakes import FakeMap
 
 from dsfec_jax.edge.uplink import SpoolFull, Uplink
-from dsfec_jax.service.app import create_app
+from dsfec_jax.service.app import Access, create_app
 
 
 def free_port() -> int:
@@ -36,7 +36,7 @@ class Service:
         self.db, self.port, self.url = db, port, f"http://127.0.0.1:{port}"
 
     def start(self):
-        self.server = uvicorn.Server(uvicorn.Config(create_app(self.db), host="127.0.0.1", port=self.port, log_level="warning"))
+        self.server = uvicorn.Server(uvicorn.Config(create_app(self.db, access=Access(write_auth=False)), host="127.0.0.1", port=self.port, log_level="warning"))
         self.thread = threading.Thread(target=self.server.run, daemon=True)
         self.thread.start()
         deadline = time.monotonic() + 10

@@ -20,7 +20,8 @@ def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
     run_dir, searched = tmp_path / "nas", tmp_path / "searched.json"
     monkeypatch.setattr(search.nas.register, "SEARCHED", searched)  # never the package's own file
     assert main(["--space", "yolov8n_adapter", "--profile", "smoke", "--max-params", "2.0e6", "--run-dir", str(run_dir),
-                 "--no-progress", "--register", "smoke_search", "--standalone", "1", "--spread", "1"]) == 0
+                 "--no-progress", "--register", "smoke_search", "--standalone", "1", "--spread", "1",
+                 "--record", str(tmp_path / "ranking.json")]) == 0
     records = [json.loads(line) for line in (run_dir / "journal.jsonl").read_text().splitlines()]
     assert len(records) == len({r["key"] for r in records}) >= 6
     assert all(r["costs"]["params"] <= 2.0e6 and 0 <= r["mAP50"] <= 100 and len(from_key(r["key"])) == 18 for r in records)
@@ -33,6 +34,9 @@ def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
     study = json.loads((run_dir / "ranking.json").read_text())
     top = min(records, key=lambda r: (-r["mAP50"], r["key"]))
     assert study["n"] == 2 and study["pairs"][0]["key"] == top["key"] and study["best_inherited"] == top["key"]
+    shipped = json.loads((tmp_path / "ranking.json").read_text())  # the record to ship: study + provenance
+    assert shipped["ranking"] == study and shipped["seed"] == 0 and "--standalone" in shipped["command"]
+    assert shipped["environment"]["versions"]["jax"]
     trained = [json.loads(line) for line in (run_dir / "standalone" / "journal.jsonl").read_text().splitlines()]
     hand = key(get_space("yolov8n_adapter").base_genes())  # over the 2 M limit: trained as the reference only
     assert sorted(r["label"] for r in trained) == sorted([p["key"] for p in study["pairs"]] + [hand])

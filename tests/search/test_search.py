@@ -392,34 +392,3 @@ def test_quick_depth_sweep_starts_from_the_shipped_weights(tiny_search, tmp_path
     from search.inherit import initial_variables
     with pytest.raises(ValueError, match="planned from"):
         initial_variables(depth["init"])
-
-
-class _RayInitReached(Exception):
-    pass
-
-
-@pytest.mark.parametrize("address, auth", [("ray://host:10001", None), ("10.0.0.5:6379", None), (None, "disabled")])
-def test_ray_auth_is_disabled_only_for_the_local_ray_started_here(tmp_path, monkeypatch, address, auth):
-    import os
-
-    import ray
-    from search import runners
-
-    seen = {}
-
-    def fake_init(**kwargs):  # what ray.init would see; no cluster is started or reached
-        seen.update(kwargs, auth=os.environ.get("RAY_AUTH_MODE"))
-        raise _RayInitReached
-
-    monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
-    monkeypatch.setattr(ray, "is_initialized", lambda: False)
-    monkeypatch.setattr(ray, "init", fake_init)
-    todo = [{"key": "k", "label": "x", "seed": 0}]
-    with pytest.raises(_RayInitReached):
-        runners.run_ray(todo, tmp_path, address=address, log=lambda _: None)
-    assert seen["auth"] == auth and seen["address"] == (address or "local")
-    assert "RAY_AUTH_MODE" not in os.environ  # a local run's setting does not leak into a later remote one
-    monkeypatch.setenv("RAY_AUTH_MODE", "token")  # the user's explicit choice wins, local or remote
-    with pytest.raises(_RayInitReached):
-        runners.run_ray(todo, tmp_path, address=address, log=lambda _: None)
-    assert seen["auth"] == "token"

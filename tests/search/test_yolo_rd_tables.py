@@ -3,6 +3,8 @@ as overrides of yolov8n, rows shared by tables map to one trial, and the printed
 beside the paper's with the bootstrap noise verdict (records made up here from synthetic boxes: no
 training)."""
 
+import json
+
 import pytest
 
 from builders import BOXES2D_CLASSES, boxes2d_scene
@@ -64,3 +66,21 @@ def test_a_copy_is_within_noise_and_old_records_say_how_to_get_intervals():
 def test_unknown_table_is_refused():
     with pytest.raises(SystemExit, match="unknown table"):
         tables.table_rows("table9")
+
+
+def test_the_shipped_record_keeps_every_row_s_trials_and_verdicts_without_match_tables():
+    fusion2 = tables.overrides_of(tables.fusion_variant(2))
+    adapter = tables.overrides_of(zoo.config("yolov8n_adapter"))
+    records = [record(fusion2, 0, 3.0), record(adapter, 0, 0.2)]
+    for r in records:
+        r["environment"] = {"versions": {"jax": "0.10.2"}}
+    out = tables.table_record("table6", records, "python -m experiments.yolo_rd_tables table6", "quick")
+    labels = [row["label"] for row in out["rows"]]
+    assert labels == [label for label, _, _ in tables.table_rows("table6")]
+    assert not out["complete"]  # fusion option 3 has no trial yet
+    first = out["rows"][0]["trials"][0]
+    assert first["metrics"] == records[0]["metrics"] and first["environment"]["versions"]["jax"] == "0.10.2"
+    assert "matches" not in first and out["rows"][1]["trials"] == []
+    assert out["bootstrap"]["delta"]["yolov8n_adapter"]["ci95"][0] > 0
+    assert out["markdown"] == tables.markdown("table6", records)
+    json.dumps(out, allow_nan=False)  # plain JSON: it ships in the repository

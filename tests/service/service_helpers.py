@@ -14,7 +14,8 @@ import urllib.request
 
 import uvicorn
 
-from dsfec_jax.service.app import create_app
+from dsfec_jax.service.app import Access, create_app
+from dsfec_jax.service.server import guarded_config
 
 LAT0, LON0 = 49.0069, 8.4037  # Karlsruhe, the street benchmark's origin
 T0 = 1_790_000_000.0          # 2026-09-21 UTC, UNIX seconds
@@ -26,17 +27,23 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-class LiveServer:
-    """`with LiveServer(db) as srv: srv.url` - the service under uvicorn in a daemon thread. Stops
-    on exit; may be started again on the same port (an outage and a recovery)."""
+OPEN = Access(write_auth=False)  # the tests of storage and queries; test_auth.py and test_hostile.py use Access()
 
-    def __init__(self, db_path, port: int | None = None):
-        self.db_path, self.port = db_path, port or free_port()
+
+class LiveServer:
+    """`with LiveServer(db) as srv: srv.url` - the service under uvicorn in a daemon thread, with
+    the real server's connection guards (server.guarded_config). Stops on exit; may be started
+    again on the same port (an outage and a recovery). `access`: write auth off by default."""
+
+    def __init__(self, db_path, port: int | None = None, access: Access = OPEN, header_timeout_s: float = 10.0):
+        self.db_path, self.port, self.access = db_path, port or free_port(), access
+        self.header_timeout_s = header_timeout_s
         self.url = f"http://127.0.0.1:{self.port}"
         self._server = self._thread = None
 
     def start(self) -> "LiveServer":
-        config = uvicorn.Config(create_app(self.db_path), host="127.0.0.1", port=self.port, log_level="warning")
+        config = guarded_config(create_app(self.db_path, access=self.access), "127.0.0.1", self.port,
+                                header_timeout_s=self.header_timeout_s, log_level="warning")
         self._server = uvicorn.Server(config)
         self._thread = threading.Thread(target=self._server.run, daemon=True)
         self._thread.start()
@@ -97,9 +104,10 @@ class _Delete:
 DELETE = _Delete()
 
 
-def post(url: str, body, timeout: float = 10.0) -> tuple[int, dict]:
+def post(url: str, body, timeout: float = 10.0, token: str | None = None) -> tuple[int, dict]:
     data = body if isinstance(body, bytes) else json.dumps(body).encode()
-    req = urllib.request.Request(url + "/detections", data=data, method="POST", headers={"Content-Type": "application/json"})
+    headers = {"Content-Type": "application/json", **({"Authorization": f"Bearer {token}"} if token else {})}
+    req = urllib.request.Request(url + "/detections", data=data, method="POST", headers=headers)
     try:
         with urllib.request.urlopen(req, timeout=timeout) as r:
             return r.status, json.loads(r.read())
@@ -107,9 +115,10 @@ def post(url: str, body, timeout: float = 10.0) -> tuple[int, dict]:
         return e.code, json.loads(e.read() or b"{}")
 
 
-def get(url: str, path: str, timeout: float = 10.0) -> tuple[int, dict | str]:
+def get(url: str, path: str, timeout: float = 10.0, token: str | None = None) -> tuple[int, dict | str]:
+    req = urllib.request.Request(url + path, headers={"Authorization": f"Bearer {token}"} if token else {})
     try:
-        with urllib.request.urlopen(url + path, timeout=timeout) as r:
+        with urllib.request.urlopen(req, timeout=timeout) as r:
             text = r.read().decode()
             return r.status, json.loads(text) if r.headers.get_content_type() == "application/json" else text
     except urllib.error.HTTPError as e:

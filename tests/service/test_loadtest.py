@@ -1,6 +1,6 @@
 """The fleet load test (edge/loadtest.py): its database check catches a lost, an extra and an
-altered batch, and a short kill test end to end (server SIGKILLed mid-load, restarted) loses and
-duplicates nothing."""
+altered batch, and a short kill test end to end (server SIGKILLed mid-load, restarted; write
+tokens on, one per device) loses and duplicates nothing."""
 
 from __future__ import annotations
 
@@ -45,6 +45,7 @@ def test_a_short_kill_test_loses_and_duplicates_nothing(tmp_path):
                             "--out", str(out), "--workdir", str(tmp_path / "work")])
     record = json.loads((out / "loadtest_kill.json").read_text())
     assert status == 0 and record["checks"]["passed"] and record["checks"]["exactly_once"]
+    assert record["checks"]["post_without_token_status"] == 401  # the devices posted with their tokens
     figures = record["figures"]
     assert figures["kill"]["outage_s"] >= 0.3 and figures["failed_attempts"] >= 1       # the devices saw the outage
     assert record["checks"]["batches_stored"] == record["checks"]["batches_generated"] > 40

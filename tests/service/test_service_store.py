@@ -20,12 +20,13 @@ def test_a_batch_that_fails_half_way_leaves_nothing(tmp_path, monkeypatch):
     assert store.put(good) == "stored"
 
     def half(conn, b, digest, received):  # the batch row goes in, then the objects fail
-        conn.execute("INSERT INTO batches VALUES (?, ?, ?, ?, 0, 0, 0, 0, 0, ?, ?)",
-                     (b.batch_id, b.device, b.frame, b.time, digest, received))
+        conn.execute("INSERT INTO batches (device, batch_id, frame, time, ego_lat, ego_lon, ego_alt, ego_heading_deg,"
+                     " n_objects, content_sha256, received) VALUES (?, ?, ?, ?, 0, 0, 0, 0, 0, ?, ?)",
+                     (b.device, b.batch_id, b.frame, b.time, digest, received))
         raise sqlite3.OperationalError("disk I/O error (simulated)")
 
     monkeypatch.setattr(Store, "_insert", staticmethod(half))
-    with pytest.raises(sqlite3.OperationalError):
+    with pytest.raises(sqlite3.OperationalError, match="simulated"):
         store.put(FrameBatch.model_validate(make_batch(1, n_objects=3)))
     monkeypatch.undo()
     assert store.counts() == {"batches": 1, "objects": 3, "devices": 1}
@@ -39,9 +40,10 @@ def test_reads_come_back_in_the_exchange_format(tmp_path):
     store = Store(tmp_path / "map.sqlite")
     posted = make_batch(4, n_objects=2)
     store.put(FrameBatch.model_validate(posted))
-    batches, truncated = store.objects()
-    assert batches == [posted] and not truncated
-    assert store.tracks() == {"dev-01": [(posted["time"], posted["ego"]["lon"], posted["ego"]["lat"])]}
+    batches, truncated, cursor = store.objects()
+    assert batches == [posted] and not truncated and cursor == 2
+    assert store.tracks() == ({"dev-01": [(posted["time"], posted["ego"]["lon"], posted["ego"]["lat"])]}, 1)
+    assert list(store.export()) == [posted]
     store.close()
 
 
@@ -64,3 +66,50 @@ def test_the_service_starts_light_without_jax():
             f"print(sorted(m for m in {heavy!r} if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
     assert out.stdout.strip() == "[]", out
+
+
+def _vm_steps(store: Store, read) -> int:
+    """SQLite virtual-machine instructions `read()` costs on the calling thread's connection: a
+    count of work that does not depend on the machine's speed or load."""
+    steps = [0]
+    conn = store._conn()
+    conn.set_progress_handler(lambda: steps.__setitem__(0, steps[0] + 1), 1)
+    try:
+        read()
+    finally:
+        conn.set_progress_handler(None, 1)
+    return steps[0]
+
+
+def test_health_counts_cost_the_same_for_10_and_2000_batches(tmp_path):
+    store = Store(tmp_path / "map.sqlite")
+    for i in range(10):
+        store.put(FrameBatch.model_validate(make_batch(i, f"d{i % 3}", n_objects=3)))
+    small = _vm_steps(store, store.counts)
+    with store.transaction() as tx:  # 1990 more batches, the way Store.put books them
+        for i in range(10, 2000):
+            Store._insert(tx, FrameBatch.model_validate(make_batch(i, f"d{i % 3}", n_objects=3)), "0" * 64, 0.0)
+    assert store.counts() == {"batches": 2000, "objects": 6000, "devices": 3}
+    assert _vm_steps(store, store.counts) == small < 200  # a COUNT(*) over objects would be >= 6000
+    store.close()
+
+
+def test_tracks_are_decimated_evenly_keeping_the_first_and_last_position(tmp_path):
+    store = Store(tmp_path / "map.sqlite")
+    with store.transaction() as tx:
+        for i in range(3000):
+            Store._insert(tx, FrameBatch.model_validate(make_batch(i, n_objects=0)), "0" * 64, 0.0)
+    tracks, cursor = store.tracks(max_points=100)
+    times = [t for t, _, _ in tracks["dev-01"]]
+    assert len(times) == 100 and cursor == 3000
+    assert times[0] == make_batch(0)["time"] and times[-1] == make_batch(2999)["time"]
+    gaps = [b - a for a, b in zip(times, times[1:])]
+    assert max(gaps) < 1.1 * min(gaps) + 0.11  # evenly spread: every ~30th frame
+    seeks = _vm_steps(store, lambda: store.tracks(max_points=100))
+    with store.transaction() as tx:
+        for i in range(3000, 9000):
+            Store._insert(tx, FrameBatch.model_validate(make_batch(i, n_objects=0)), "0" * 64, 0.0)
+    assert _vm_steps(store, lambda: store.tracks(max_points=100)) < 1.5 * seeks  # 3x the rows, not 3x the work
+    recent, _ = store.tracks(after=8990)
+    assert [len(p) for p in recent.values()] == [10]
+    store.close()

@@ -1,27 +1,42 @@
 // The map page: fetch /tracks and /objects, draw them on a canvas, refresh every few seconds.
 //
+// Incremental: the first fetch takes the latest OBJECT_LIMIT objects and each device's track
+// (the server spreads at most TRACK_POINTS positions over it); later fetches pass the answers'
+// cursors (`after=`) and get only what was stored since, so an idle map costs the server two
+// index seeks per refresh however large the database. The page keeps the latest OBJECT_LIMIT
+// objects and thins a track that grows past 2 x TRACK_POINTS. A count that went down in /health
+// (an operator's delete) starts over. Nothing here spreads an array into a call (Math.min(...xs)
+// throws a RangeError past ~125k arguments): extents are computed in loops.
+// Reads that need a token: open the page as /#token=<read token> (the fragment never leaves the
+// browser; the page sends it as a bearer header).
+//
 // Projection: local equirectangular about the data's centre, in metres
 //   x = R (lon - lon0) cos(lat0),  y = R (lat - lat0),  R = 6 371 008.8 m (mean Earth radius),
 // fitted to the data with one scale for both axes (a metre is a metre in every direction). Good to
 // well under 1 % over a city; this is a display, the service stores WGS84 degrees as posted.
 // After each draw the body carries data-objects / data-tracks (counts drawn) and data-drawn (draws
-// so far), so a headless browser can check what the page shows.
+// so far), so a headless browser can check what the page shows; data-error holds a failed
+// update's message (and the status line says it).
 "use strict";
 
 const REFRESH_MS = 3000;
 const OBJECT_LIMIT = 5000;
+const TRACK_POINTS = 2000;
 const R_EARTH = 6371008.8;
 const CLASS_COLOURS = { car: "#1f77b4", truck: "#8c564b", bus: "#9467bd", pedestrian: "#d62728", person: "#d62728",
                         cyclist: "#ff7f0e", bicycle: "#ff7f0e", motorbike: "#e377c2", motorcycle: "#e377c2" };
 const SPARE_COLOURS = ["#2ca02c", "#17becf", "#bcbd22", "#7f7f7f", "#aec7e8", "#98df8a", "#c49c94", "#f7b6d2"];
 // track lines in colours no class dot uses (no blue, red, orange, brown)
 const TRACK_COLOURS = ["#2b8a3e", "#0b7285", "#5f3dc4", "#495057", "#5c940d", "#a61e4d", "#15aabf", "#868e96"];
+const TOKEN = new URLSearchParams(location.hash.slice(1)).get("token");
 
 const canvas = document.getElementById("map");
 const legend = document.getElementById("legend");
 const statusEl = document.getElementById("status");
 const tip = document.getElementById("tip");
 let state = { tracks: [], objects: [], truncated: false, view: null };
+let cursors = { objects: null, tracks: null };
+let lastBatches = -1;
 let draws = 0;
 
 function classColour(name) {
@@ -32,51 +47,107 @@ function classColour(name) {
 }
 
 async function getJson(path) {
-  const reply = await fetch(path, { cache: "no-store" });
-  if (!reply.ok) throw new Error(`${path}: HTTP ${reply.status}`);
+  const reply = await fetch(path, { cache: "no-store", headers: TOKEN ? { Authorization: `Bearer ${TOKEN}` } : {} });
+  if (!reply.ok) throw new Error(`${path.split("?")[0]}: HTTP ${reply.status}`);
   return reply.json();
 }
 
 async function refresh() {
   try {
-    const [tracks, objects] = await Promise.all([getJson("tracks"), getJson(`objects?limit=${OBJECT_LIMIT}`)]);
-    // a device seen once is a Point (a LineString needs two positions): one list of positions for both
-    state.tracks = tracks.features.filter(f => f.geometry).map(f => ({
-      device: (f.properties && f.properties.device) || "device",
-      positions: f.geometry.type === "Point" ? [f.geometry.coordinates] : f.geometry.coordinates,
-    }));
-    state.objects = objects.features.slice().reverse();  // newest last: drawn on top
-    state.truncated = Boolean(objects.truncated);
+    const health = await getJson("health");
+    if (health.batches < lastBatches) cursors = { objects: null, tracks: null };  // rows were deleted: start over
+    lastBatches = health.batches;
+    await Promise.all([updateObjects(), updateTracks()]);
+    draw();  // inside the try: a drawing error shows in the status line, not a stale "updated"
     const n = state.objects.length;
     statusEl.className = "status";
     statusEl.textContent = `${state.tracks.length} device${state.tracks.length === 1 ? "" : "s"}, ` +
       `${n}${state.truncated ? " latest" : ""} object${n === 1 ? "" : "s"} · updated ${new Date().toLocaleTimeString()}`;
+    delete document.body.dataset.error;
   } catch (err) {
     statusEl.className = "status error";
     statusEl.textContent = `update failed (${err.message}); retrying every ${REFRESH_MS / 1000} s`;
     document.body.dataset.error = err.message;
   }
-  draw();
+}
+
+async function updateObjects() {
+  if (cursors.objects === null) {
+    const fc = await getJson(`objects?limit=${OBJECT_LIMIT}`);
+    state.objects = fc.features.slice().reverse();  // newest last: drawn on top
+    state.truncated = Boolean(fc.truncated);
+    cursors.objects = fc.cursor;
+    return;
+  }
+  const fc = await getJson(`objects?after=${cursors.objects}&limit=${OBJECT_LIMIT}`);
+  if (fc.truncated) {  // more new objects than the page keeps: take the latest afresh
+    cursors.objects = null;
+    return updateObjects();
+  }
+  for (const f of fc.features) state.objects.push(f);
+  if (state.objects.length > OBJECT_LIMIT) {
+    state.objects = state.objects.slice(state.objects.length - OBJECT_LIMIT);
+    state.truncated = true;
+  }
+  cursors.objects = fc.cursor;
+}
+
+async function updateTracks() {
+  const full = cursors.tracks === null;
+  const fc = await getJson(full ? `tracks?max_points=${TRACK_POINTS}`
+                                : `tracks?after=${cursors.tracks}&max_points=${TRACK_POINTS}`);
+  // a device seen once is a Point (a LineString needs two positions): one list of positions for both
+  const fresh = fc.features.filter(f => f.geometry).map(f => ({
+    device: (f.properties && f.properties.device) || "device",
+    positions: f.geometry.type === "Point" ? [f.geometry.coordinates] : f.geometry.coordinates,
+  }));
+  if (full) {
+    state.tracks = fresh;
+  } else {
+    for (const t of fresh) {
+      const known = state.tracks.find(k => k.device === t.device);
+      if (!known) { state.tracks.push(t); continue; }
+      for (const p of t.positions) known.positions.push(p);
+      if (known.positions.length > 2 * TRACK_POINTS) known.positions = thinned(known.positions);
+    }
+    state.tracks.sort((a, b) => (a.device < b.device ? -1 : a.device > b.device ? 1 : 0));  // stable colours
+  }
+  cursors.tracks = fc.cursor;
+}
+
+function thinned(positions) {  // every other position, the latest kept
+  const out = positions.filter((_, i) => i % 2 === 0);
+  if (out[out.length - 1] !== positions[positions.length - 1]) out.push(positions[positions.length - 1]);
+  return out;
 }
 
 // -- projection ----------------------------------------------------------------------------------
+function extent() {
+  let minLon = Infinity, maxLon = -Infinity, minLat = Infinity, maxLat = -Infinity;
+  const add = (lon, lat) => {
+    if (lon < minLon) minLon = lon;
+    if (lon > maxLon) maxLon = lon;
+    if (lat < minLat) minLat = lat;
+    if (lat > maxLat) maxLat = lat;
+  };
+  for (const t of state.tracks) for (const [lon, lat] of t.positions) add(lon, lat);
+  for (const o of state.objects) add(o.geometry.coordinates[0], o.geometry.coordinates[1]);
+  return minLon <= maxLon ? { minLon, maxLon, minLat, maxLat } : null;
+}
+
 function fitView(width, height, reserveRight) {
-  const lons = [], lats = [];
-  for (const t of state.tracks) for (const [lon, lat] of t.positions) { lons.push(lon); lats.push(lat); }
-  for (const o of state.objects) { lons.push(o.geometry.coordinates[0]); lats.push(o.geometry.coordinates[1]); }
-  if (!lons.length) return null;
-  const lat0 = (Math.min(...lats) + Math.max(...lats)) / 2, lon0 = (Math.min(...lons) + Math.max(...lons)) / 2;
+  const e = extent();
+  if (!e) return null;
+  const lat0 = (e.minLat + e.maxLat) / 2, lon0 = (e.minLon + e.maxLon) / 2;
   const k = Math.cos(lat0 * Math.PI / 180) * R_EARTH * Math.PI / 180;  // metres per degree of longitude
   const m = R_EARTH * Math.PI / 180;                                    // metres per degree of latitude
-  const xs = lons.map(l => (l - lon0) * k), ys = lats.map(l => (l - lat0) * m);
-  const spanX = Math.max(Math.max(...xs) - Math.min(...xs), 40), spanY = Math.max(Math.max(...ys) - Math.min(...ys), 40);
+  const spanX = Math.max((e.maxLon - e.minLon) * k, 40), spanY = Math.max((e.maxLat - e.minLat) * m, 40);
   const pad = 40, usable = Math.max(width - reserveRight, width / 2);  // keep the data clear of the legend
   const scale = Math.min((usable - 2 * pad) / spanX, (height - 2 * pad) / spanY);  // pixels per metre
-  const cx = (Math.max(...xs) + Math.min(...xs)) / 2, cy = (Math.max(...ys) + Math.min(...ys)) / 2;
   return {
     scale,
     project(lon, lat) {
-      return [usable / 2 + ((lon - lon0) * k - cx) * scale, height / 2 - ((lat - lat0) * m - cy) * scale];
+      return [usable / 2 + (lon - lon0) * k * scale, height / 2 - (lat - lat0) * m * scale];
     },
   };
 }
@@ -211,7 +282,7 @@ function drawLegend() {
     rows.push("<h2>Ego tracks</h2>");
     state.tracks.forEach((t, i) => rows.push(
       `<div class="row"><span class="line" style="border-color:${TRACK_COLOURS[i % TRACK_COLOURS.length]}"></span>` +
-      `${escapeHtml(t.device)}<span class="count">${t.positions.length} frame${t.positions.length === 1 ? "" : "s"}</span></div>`));
+      `${escapeHtml(t.device)}<span class="count">${t.positions.length} position${t.positions.length === 1 ? "" : "s"}</span></div>`));
   }
   legend.innerHTML = rows.join("");
   legend.style.display = rows.length ? "" : "none";
