@@ -70,7 +70,7 @@ def test_a_frame_queued_but_not_logged_is_taken_from_the_queue_not_recomputed(tm
 def test_a_wrong_token_stops_the_run_and_the_next_run_delivers_everything(tmp_path):
     out = tmp_path / "edge"
     with FakeMap(token="right") as server:
-        summary = run(out, server.url, 20, CheapPipeline(work_s=0.01), token="wrong")
+        summary = run(out, server.url, 20, CheapPipeline(work_s=0.02), token="wrong")
         assert "HTTP 401" in summary["stopped"] and summary["frames_placed"] < 20
         assert summary["uplink"]["queued"] == summary["frames_placed"] and not summary["uplink"]["delivered_all"]
         assert not (out / "queue" / "rejected").exists() and server.stored == {}
