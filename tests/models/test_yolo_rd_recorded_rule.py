@@ -1,0 +1,31 @@
+"""The YOLO-RD family trains with ultralytics 8.4.190's small-box rule by default, while the shipped
+RD weights, trained before with the (8, 16) rule, still reproduce from the command their manifest
+records (issue 49)."""
+
+import dataclasses
+import json
+import shlex
+
+import pytest
+
+from dsfec_jax import cli, zoo
+from dsfec_jax.core.provenance import jsonable
+from dsfec_jax.models.yolo_rd.config import REFERENCE_SMALL_SIDE, SHIPPED_SMALL_SIDE, YoloRDConfig
+
+RD_WEIGHTS = sorted(p for p in zoo.WEIGHTS_DIR.glob("*.msgpack") if zoo.family_of(p.stem).modality == "rd")
+
+
+def test_new_training_defaults_to_the_reference_rule():
+    assert YoloRDConfig().assign_small_side == REFERENCE_SMALL_SIDE == (16.0, 16.0)
+    assert all(zoo.config(p.stem).assign_small_side == REFERENCE_SMALL_SIDE for p in RD_WEIGHTS)
+
+
+@pytest.mark.parametrize("path", RD_WEIGHTS, ids=lambda p: p.stem)
+def test_a_shipped_manifests_command_rebuilds_the_config_it_was_trained_with(path):
+    """`dsfec train` run with the recorded command gets the recorded config, small-box rule included."""
+    training = json.loads(path.with_name(path.name + ".json").read_text())["training"]
+    args = cli.parse(shlex.split(training["command"])[1:])
+    config = zoo.config(args.model, **cli.parse_overrides(args.set))
+    assert tuple(training["config"]["assign_small_side"]) == SHIPPED_SMALL_SIDE
+    rebuilt = jsonable(dataclasses.asdict(config))
+    assert {k: rebuilt[k] for k in training["config"]} == training["config"]  # fields added since: defaults
