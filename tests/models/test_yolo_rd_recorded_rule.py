@@ -29,3 +29,12 @@ def test_a_shipped_manifests_command_rebuilds_the_config_it_was_trained_with(pat
     assert tuple(training["config"]["assign_small_side"]) == SHIPPED_SMALL_SIDE
     rebuilt = jsonable(dataclasses.asdict(config))
     assert {k: rebuilt[k] for k in training["config"]} == training["config"]  # fields added since: defaults
+
+
+def test_the_nas_space_and_its_registered_subnet_keep_the_rule_the_readmes_nas_figures_used():
+    from search.nas.spaces import get_space
+
+    space = get_space("yolov8n_adapter")
+    for genes in (space.smallest(), space.largest()):  # supernet, stand-alone retraining and registration
+        assert zoo.config(space.base, **space.overrides(genes)).assign_small_side == SHIPPED_SMALL_SIDE
+    assert zoo.config("yolov8n_adapter_search").assign_small_side == SHIPPED_SMALL_SIDE
