@@ -171,6 +171,7 @@ def _predictor(args, overrides: dict, score_threshold: float):
 def eval_or_predict(args, overrides: dict) -> int:
     """`dsfec eval` / `dsfec predict` of a camera model: VOC mAP@0.5 (VOC07 and all-point) and COCO AP."""
     from .cli_report import predict_and_report
+    from .data.camera.voc import UnreadableImage
 
     refuse_point_flags(args, READS)
     eval_size(args)
@@ -179,8 +180,11 @@ def eval_or_predict(args, overrides: dict) -> int:
     onnx = _onnx_predictor(args, threshold) if args.runtime == "onnx" else None
     images = _images(args, args.split, args.frames)
     predictor = onnx or _predictor(args, overrides, threshold)
-    return predict_and_report(args, images, predictor, predictor.predict_images, write_predictions, "images",
-                              score_threshold=threshold, classes_scored=list(predictor.classes))
+    try:  # images are decoded as the loop reaches them
+        return predict_and_report(args, images, predictor, predictor.predict_images, write_predictions, "images",
+                                  score_threshold=threshold, classes_scored=list(predictor.classes))
+    except UnreadableImage as err:
+        sys.exit(f"dsfec {args.command}: {err}")
 
 
 def write_predictions(args, images, detections: dict, predictor) -> None:

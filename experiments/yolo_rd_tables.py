@@ -21,6 +21,12 @@ journal from before the matches were kept gains them without training: `python -
 RUN_DIR`. The paper's numbers are RADDet's (real data); ours are the synthetic benchmark's, so only
 orderings and gaps compare.
 
+Every row pins the assigner's small-box rule in its trial overrides (--small-side, default 8,16:
+the rule the README's tables were measured with, the family's default before issue 49; 16,16 is
+ultralytics 8.4.190's, the family's default now), so the command reproduces the README's tables
+and a journal's records say which rule they trained with. Records from before the pin (no
+assign_small_side in their overrides) match no row: re-run them.
+
 What ships: RUN_DIR is scratch (runs/ is not in the repository), so each run also writes the
 table's record to --record (default experiments/records/yolo_rd/TABLE_PROFILE.json): the command,
 every row's trials with their seeds, figures, costs, wall/CPU time and environment (versions), the
@@ -34,6 +40,7 @@ if __name__ == "__main__":  # a command that runs XLA: its process settings befo
 
     prepare_xla_process()  # may restart this command (core/host_memory.py)
 
+import argparse
 import dataclasses
 import shlex
 import statistics
@@ -43,6 +50,7 @@ from pathlib import Path
 from dsfec_jax.core import atomic
 from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.models.yolo_rd import paper
+from dsfec_jax.models.yolo_rd.config import SHIPPED_SMALL_SIDE
 from dsfec_jax.models.yolo_rd.variants import (TABLE5_ROWS, TABLE6_OPTIONS, VARIANTS, fusion_variant,
                                                representation_variant)
 from dsfec_jax.metrics.boxes2d.coco import COCO_IOU_THRESHOLDS
@@ -64,6 +72,20 @@ def overrides_of(cfg) -> dict:
     base = VARIANTS[BASE]
     return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)
             if f.name not in UNCOMPARED and getattr(cfg, f.name) != getattr(base, f.name)}
+
+
+def row_overrides(cfg, small_side=SHIPPED_SMALL_SIDE) -> dict:
+    """A row's trial overrides: `cfg`'s overrides of the base, the small-box rule always pinned."""
+    return {**overrides_of(cfg), "assign_small_side": tuple(float(v) for v in small_side)}
+
+
+def small_side_arg(text: str) -> tuple[float, float]:
+    """--small-side BELOW,WIDENED_TO (pixels)."""
+    try:
+        below, widened_to = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected BELOW,WIDENED_TO in pixels (8,16 or 16,16); got {text!r}") from None
+    return below, widened_to
 
 
 def canonical_label(cfg, fallback: str) -> str:
@@ -141,15 +163,17 @@ def _delta(label: str, mean, first, sig: dict | None) -> str:
     return f"{mean - first:+.1f} [{lo:+.1f}, {hi:+.1f}]" + (" above noise" if lo > 0 or hi < 0 else " within noise")
 
 
-def markdown(table: str, records: list[dict]) -> str:
+def markdown(table: str, records: list[dict], small_side=SHIPPED_SMALL_SIDE) -> str:
     """The table: per row ours (mean ± sd over seeds) beside the paper's, and the headline's change
-    from the first row with its 95 % paired-bootstrap interval over validation samples (and seeds)."""
+    from the first row with its 95 % paired-bootstrap interval over validation samples (and seeds);
+    the rows trained with the small-box rule `small_side`."""
     rows = table_rows(table)
     by_key = {}
     for r in records:
         by_key.setdefault(_row_key(r["overrides"]), []).append(r)
     headline = COLUMNS[table][-1][0]
-    found = [[r for r in by_key.get(_row_key(overrides_of(cfg)), []) if r["status"] == "ok"] for _, cfg, _ in rows]
+    found = [[r for r in by_key.get(_row_key(row_overrides(cfg, small_side)), []) if r["status"] == "ok"]
+             for _, cfg, _ in rows]
     sig = _bootstrap(table, rows, found)
     first = _stats(found[0], headline)[0] if found else None
     extra = [k for k in ("backbone", "adapter", "fusion") if k in rows[0][2]]
@@ -174,21 +198,21 @@ def markdown(table: str, records: list[dict]) -> str:
     return "\n".join(lines) + "\n\n" + note + "\n"
 
 
-def table_record(table: str, records: list[dict], command: str, profile: str) -> dict:
+def table_record(table: str, records: list[dict], command: str, profile: str, small_side=SHIPPED_SMALL_SIDE) -> dict:
     """The shipped record of one table: each row's trials (seeds, figures, costs, time, versions),
     the bootstrap verdicts and the markdown, so the README's figures are traceable without runs/."""
     rows = table_rows(table)
     by_key = {}
     for r in records:
         by_key.setdefault(_row_key(r["overrides"]), []).append(r)
-    found = [by_key.get(_row_key(overrides_of(cfg)), []) for _, cfg, _ in rows]
+    found = [by_key.get(_row_key(row_overrides(cfg, small_side)), []) for _, cfg, _ in rows]
     sig = _bootstrap(table, rows, [[r for r in recs if r["status"] == "ok"] for recs in found])
-    return {"table": table, "command": command, "profile": profile,
+    return {"table": table, "command": command, "profile": profile, "assign_small_side": list(small_side),
             "complete": all(any(r["status"] == "ok" for r in recs) for recs in found),
-            "rows": [{"label": label, "overrides": overrides_of(cfg), "paper_raddet": jsonable(ref),
+            "rows": [{"label": label, "overrides": row_overrides(cfg, small_side), "paper_raddet": jsonable(ref),
                       "trials": [{k: r[k] for k in TRIAL_FIELDS if k in r} for r in recs]}
                      for (label, cfg, ref), recs in zip(rows, found)],
-            "bootstrap": jsonable(sig), "markdown": markdown(table, records)}
+            "bootstrap": jsonable(sig), "markdown": markdown(table, records, small_side)}
 
 
 def _row_key(overrides: dict) -> str:
@@ -202,6 +226,9 @@ def main(argv=None) -> int:
     table, rest = argv[0], argv[1:]
     rows = table_rows(table)
     p = parser(f"python -m experiments.yolo_rd_tables {table}", __doc__, base=BASE)
+    p.add_argument("--small-side", type=small_side_arg, default=SHIPPED_SMALL_SIDE, metavar="BELOW,WIDENED_TO",
+                   help="the assigner's small-box rule every row trains with (default 8,16: the README's tables; "
+                        "16,16: ultralytics 8.4.190's)")
     p.add_argument("--record", default=DEFAULT_RECORD_DIR,
                    help=f"where the table's shipped record goes (default {DEFAULT_RECORD_DIR})")
     args = parse(p, rest)
@@ -210,7 +237,7 @@ def main(argv=None) -> int:
     def build():
         seen, out = set(), []
         for label, cfg, _ in rows:
-            overrides = overrides_of(cfg)
+            overrides = row_overrides(cfg, args.small_side)
             if _row_key(overrides) not in seen:
                 seen.add(_row_key(overrides))
                 out.append({"label": label, "overrides": overrides})
@@ -218,11 +245,12 @@ def main(argv=None) -> int:
 
     run_search(args, f"yolo_rd_{table}", build, f"YOLO-RD {table} (synthetic RD benchmark)", BASE)
     records = Journal(args.out).records()
-    text = markdown(table, records)
-    atomic.write_text(Path(args.out) / f"{table}.md", f"### {table} ({args.profile} profile)\n\n{text}")
+    text = markdown(table, records, args.small_side)
+    rule = "small boxes: sides under {:g} px -> {:g} px".format(*args.small_side)
+    atomic.write_text(Path(args.out) / f"{table}.md", f"### {table} ({args.profile} profile, {rule})\n\n{text}")
     command = f"python -m experiments.yolo_rd_tables {table} " + " ".join(shlex.quote(a) for a in rest)
     record_path = Path(args.record) / f"{table}_{args.profile}.json"
-    atomic.write_json(record_path, table_record(table, records, command.strip(), args.profile))
+    atomic.write_json(record_path, table_record(table, records, command.strip(), args.profile, args.small_side))
     print(text)
     print(f"record: {record_path}")
     return 0

@@ -86,3 +86,22 @@ def test_what_the_camera_commands_refuse(argv, message):
     with pytest.raises(SystemExit) as err:
         cli.main(argv)
     assert message in str(err.value)
+
+
+def test_predict_on_a_truncated_jpeg_exits_with_a_message_naming_it(tmp_path):
+    """Images are decoded as the loop reaches them: a cut-off JPEG is a message, not a traceback
+    (the first image of the loop, so nothing is compiled before it)."""
+    database = shared_data_dir() / "voc_review_od_metrics" / "data" / "database"
+    root = tmp_path / "voc"
+    (root / "gts" / "pascalvoc_format").mkdir(parents=True)
+    (root / "images").mkdir()
+    xml = "2007_000027.xml"
+    (root / "gts" / "pascalvoc_format" / xml).write_bytes((database / "gts" / "pascalvoc_format" / xml).read_bytes())
+    whole = (database / "images" / "2007_000027.jpg").read_bytes()
+    (root / "images" / "2007_000027.jpg").write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(SystemExit) as err:
+        cli.main(["predict", "--model", "shuffle_yolov3", "--data", f"voc:{root}", "--split", "all", "--size", "64",
+                  "--out", str(tmp_path / "dets.json")])
+    message = str(err.value)
+    assert message.startswith("dsfec predict: ") and "2007_000027.jpg: not a readable image" in message
+    assert "truncated" in message and not (tmp_path / "dets.json").exists()

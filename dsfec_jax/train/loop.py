@@ -4,7 +4,8 @@ RUN_DIR/
   run.json                 model config, schedule, seed, data description, versions; written when
                            the run starts and never rewritten: a resume must ask for the same setup
                            (else RunMismatch) and is appended to its "resumes" list
-  metrics.jsonl            one JSON line per logged step (and per evaluation)
+  metrics.jsonl            one JSON line per logged step (and per evaluation); RD and camera rows
+                           count the ground-truth boxes cut off since the previous row (dropped_boxes)
   checkpoints/step_0000300.msgpack (+ .json)   the last `keep` states
   checkpoints/best.msgpack (+ .json)           the state with the best validation score
 
@@ -39,6 +40,7 @@ from ..core import atomic, checkpoint
 from ..core.provenance import jsonable, versions
 from ..data.batches import BatchStream
 from ..data.prefetch import Prefetcher
+from .dropped_boxes import DroppedBoxes
 from .loss_watch import LossWatch, NonFiniteLoss
 from .schedules import Schedule, optimizer
 from .step import batch_on_device, init_state, make_train_step
@@ -219,6 +221,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     best = _best_score(spec.run_dir, best_key)
     scores = None
     losses = LossWatch()
+    dropped = DroppedBoxes(detector.name)
     t0 = time.perf_counter()
 
     def ready_batch(step: int) -> dict:  # built, and copied into XLA buffers, in the worker
@@ -230,6 +233,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
             step_fn = step_fns[batch["window"] % len(step_fns)]
             state, metrics = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]})
             losses.add(step, metrics["loss"])
+            dropped.add(step, batch)
             done = step + 1
             log_step = done % spec.log_every == 0 or done == end
             eval_step = evaluate is not None and eval_every and (done % eval_every == 0 or done == end)
@@ -241,7 +245,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
             if log_step:
                 bar.set_postfix(loss=f"{loss:.3f}", fps=f"{rate:.1f}")
                 values = {k: float(v) for k, v in jax.device_get(metrics).items()}
-                row = {"step": done, "frames_per_s": round(rate, 2), **values}
+                row = {"step": done, "frames_per_s": round(rate, 2), **values, **dropped.row()}
                 log.write(json.dumps(row) + "\n")
                 log.flush()
             if eval_step:

@@ -15,13 +15,20 @@
 from __future__ import annotations
 
 from dsfec_jax import zoo
-from dsfec_jax.models.yolo_rd.config import scaled_width
+from dsfec_jax.models.yolo_rd.config import SHIPPED_SMALL_SIDE, scaled_width
 
 from .space import Choice, SearchSpace
 
 QUARTERS = (0.25, 0.5, 0.75, 1.0)
 HALVES = (0.5, 1.0)
 FUSIONS = (1, 2, 3)
+
+
+# The assigner's small-box rule of every subnet (supernet, stand-alone retraining, registered
+# subnets): the README's NAS figures were measured with the family's pre-issue-49 default (8, 16),
+# so the space pins it, and a registered subnet records it; ultralytics 8.4.190's (16, 16) is the
+# family's default for everything else (models/yolo_rd/config.py).
+YOLO_RD_SEARCH_SMALL_SIDE = SHIPPED_SMALL_SIDE
 
 
 def yolov8n_adapter_space(base: str = "yolov8n_adapter") -> SearchSpace:
@@ -35,7 +42,8 @@ def yolov8n_adapter_space(base: str = "yolov8n_adapter") -> SearchSpace:
         return {"backbone_width_ratios": tuple(c[x.name] for x in backbone),
                 "stem_widths": tuple(scaled_width(w, c[x.name]) for w, x in zip(cfg.stem_widths, stem)),
                 "fusion": tuple(c[x.name] for x in exchangers),
-                "neck_width_ratios": tuple(c[x.name] for x in neck)}
+                "neck_width_ratios": tuple(c[x.name] for x in neck),
+                "assign_small_side": YOLO_RD_SEARCH_SMALL_SIDE}
 
     return SearchSpace("yolov8n_adapter", base, tuple(backbone + stem + exchangers + neck), to_overrides,
                        "the YOLOv8n-Adapter paper's Table 1", {x.name: 1 for x in exchangers})

@@ -10,6 +10,7 @@ import pytest
 
 from dsfec_jax.models.yolo_rd.assigner import AssignerConfig, assign, candidates_inside
 from dsfec_jax.boxes.nms2d import detect_host
+from dsfec_jax.models.yolo_rd.config import YoloRDConfig
 from dsfec_jax.models.yolo_rd.decode import decode, detect
 from dsfec_jax.models.yolo_rd.loss import YoloLossConfig, detection_loss
 
@@ -35,7 +36,20 @@ def ciou_numpy(b1, b2, eps=1e-7):
     return iou - (rho2 / c2 + v * v / (v - iou + 1 + eps))
 
 
-def reference_assign(scores, boxes, anchors, gt_labels, gt_boxes, gt_mask, topk=10, alpha=0.5, beta=6.0, eps=1e-9):
+def widened_to_stride_val(box, stride_val):
+    """ultralytics 8.4.190's select_candidates_in_gts: every side shorter than stride_val becomes
+    stride_val about the box centre (stride_val = stride[1] = 16 in v8DetectionLoss); None: as is."""
+    if stride_val is None:
+        return box
+    x1, y1, x2, y2 = (float(v) for v in box)
+    w, h = x2 - x1, y2 - y1
+    w, h = (stride_val if w < stride_val else w), (stride_val if h < stride_val else h)
+    cx, cy = (x1 + x2) / 2, (y1 + y2) / 2
+    return cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2
+
+
+def reference_assign(scores, boxes, anchors, gt_labels, gt_boxes, gt_mask, topk=10, alpha=0.5, beta=6.0, eps=1e-9,
+                     stride_val=None):
     """The TAL rules one image, one GT, one anchor at a time (float64)."""
     b, a, c = scores.shape
     m = gt_boxes.shape[1]
@@ -46,7 +60,7 @@ def reference_assign(scores, boxes, anchors, gt_labels, gt_boxes, gt_mask, topk=
         for g in range(m):
             if not gt_mask[i, g]:
                 continue
-            x1, y1, x2, y2 = gt_boxes[i, g]
+            x1, y1, x2, y2 = widened_to_stride_val(gt_boxes[i, g], stride_val)
             for j, (x, y) in enumerate(anchors):
                 inside[g, j] = min(x - x1, y - y1, x2 - x, y2 - y) > eps
                 if inside[g, j]:
@@ -197,20 +211,62 @@ def test_padded_gts_change_nothing_and_no_gts_means_background():
         assert not empty.foreground.any() and not empty.scores.any()
 
 
-@pytest.mark.parametrize("seed", range(3))
-def test_assigner_matches_a_loop_by_loop_reference(seed):
+def realistic_assigner_batch(seed, batch=2, height=96, width=64, nc=3, slots=8):
+    """What the assigner sees in training, small: the anchors of strides 8, 16 and 32 on a height x
+    width input (126), up to `slots` GTs an image with sides of 4-40 px (many of 8-16 px), predicted
+    boxes scattered about their anchors and random class scores."""
     rng = np.random.default_rng(seed)
-    _, gt_boxes, gt_labels, gt_mask = random_batch(seed, slots=5)
-    anchors = np.stack(np.meshgrid(np.arange(4) * 8 + 4.0, np.arange(8) * 8 + 4.0), -1).reshape(-1, 2)
-    centre = anchors[None] + rng.normal(0, 3, (2, 32, 2))
-    half = rng.uniform(3, 14, (2, 32, 2))
-    pred = np.concatenate([centre - half, centre + half], -1).astype(np.float32)
-    scores = rng.uniform(0.01, 1, (2, 32, 3)).astype(np.float32)
-    got = assign_jit(scores, pred, anchors.astype(np.float32), gt_labels, gt_boxes, gt_mask, cfg=AssignerConfig(topk=4))
-    want_scores, want_fg, want_idx = reference_assign(scores, pred, anchors, gt_labels, gt_boxes, gt_mask, topk=4)
-    assert want_fg.sum() > 4
+    anchors = np.concatenate([np.stack(np.meshgrid(np.arange(width // s) * s + s / 2, np.arange(height // s) * s + s / 2),
+                                       -1).reshape(-1, 2) for s in (8, 16, 32)])
+    strides = np.concatenate([np.full((height // s) * (width // s), s) for s in (8, 16, 32)])
+    size = rng.uniform(4, 40, (batch, slots, 2))
+    corner = rng.uniform(0, [width, height], (batch, slots, 2)) - size / 2
+    gt_boxes = np.clip(np.concatenate([corner, corner + size], -1), 0, [width, height, width, height])
+    gt_labels = rng.integers(0, nc, (batch, slots))
+    gt_mask = np.arange(slots)[None] < rng.integers(3, slots + 1, (batch, 1))
+    centre = anchors[None] + rng.normal(0, strides[None, :, None] / 2, (batch, len(anchors), 2))
+    half = rng.uniform(2, 20, (batch, len(anchors), 2))
+    pred = np.concatenate([centre - half, centre + half], -1)
+    scores = rng.uniform(0.01, 1, (batch, len(anchors), nc))
+    return [x.astype(np.float32) for x in (scores, pred, anchors, gt_boxes)] + [gt_labels, gt_mask]
+
+
+# the family's own setting (models/yolo_rd/family.py): what training runs
+FAMILY_ASSIGNER = AssignerConfig(small_side=YoloRDConfig().assign_small_side)
+
+
+def test_the_realistic_fixture_has_sides_that_the_two_small_box_rules_treat_differently():
+    """So the reference test below tells ultralytics 8.4.190's rule (sides under 16 px -> 16) from
+    the one the shipped weights used (only sides under 8 px -> 16)."""
+    changed = 0
+    for seed in range(6):
+        _, _, anchors, gt_boxes, _, gt_mask = realistic_assigner_batch(seed)
+        rules = [np.asarray(candidates_inside(anchors, gt_boxes, small_side=r)) & gt_mask[..., None]
+                 for r in ((16.0, 16.0), (8.0, 16.0))]
+        changed += int((rules[0] != rules[1]).sum())
+    assert changed > 20
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_assigner_matches_ultralytics_8_4_190_loop_by_loop(seed):
+    """The family's assigner against a numpy transcription of 8.4.190's TaskAlignedAssigner as
+    v8DetectionLoss builds it (topk 10, stride_val 16), on realistic batches: several GTs compete,
+    and the best overlap that normalises the target scores must be taken over each GT's positives."""
+    scores, pred, anchors, gt_boxes, gt_labels, gt_mask = realistic_assigner_batch(seed)
+    got = assign_jit(scores, pred, anchors, gt_labels, gt_boxes, gt_mask, cfg=FAMILY_ASSIGNER)
+    want_scores, want_fg, want_idx = reference_assign(scores, pred, anchors, gt_labels, gt_boxes, gt_mask,
+                                                      topk=10, stride_val=16.0)
+    assert want_fg.sum() > 20
     np.testing.assert_array_equal(got.foreground, want_fg)
     np.testing.assert_array_equal(np.where(want_fg, got.gt_index, 0), np.where(want_fg, want_idx, 0))
+    np.testing.assert_allclose(got.scores, want_scores, rtol=1e-4, atol=1e-6)
+
+
+def test_the_bare_assigner_keeps_the_yolov8_era_rule():
+    scores, pred, anchors, gt_boxes, gt_labels, gt_mask = realistic_assigner_batch(0)
+    got = assign_jit(scores, pred, anchors, gt_labels, gt_boxes, gt_mask)
+    want_scores, want_fg, _ = reference_assign(scores, pred, anchors, gt_labels, gt_boxes, gt_mask, topk=10)
+    np.testing.assert_array_equal(got.foreground, want_fg)
     np.testing.assert_allclose(got.scores, want_scores, rtol=1e-4, atol=1e-6)
 
 

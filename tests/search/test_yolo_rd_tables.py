@@ -27,6 +27,20 @@ def test_every_row_is_a_valid_config_and_shared_rows_share_overrides():
     assert len(keys) == 15
 
 
+def test_every_row_trains_with_the_small_box_rule_the_readmes_tables_were_measured_with():
+    """The family now defaults to ultralytics 8.4.190's rule (16, 16); the README's tables were
+    measured with (8, 16), so the tables' trials pin it (or the rule --small-side names), and a
+    record trained with the other rule fills no row."""
+    for table in ("table3", "table4", "table5", "table6"):
+        for _, cfg, _ in tables.table_rows(table):
+            assert zoo.config("yolov8n", **tables.row_overrides(cfg)).assign_small_side == (8.0, 16.0)
+            assert zoo.config("yolov8n", **tables.row_overrides(cfg, (16, 16))).assign_small_side == (16.0, 16.0)
+    fusion2 = tables.fusion_variant(2)
+    other_rule = [record(tables.row_overrides(fusion2, (16.0, 16.0)), 0, 1.0)]
+    assert "| yolov8n_adapter fusion=2 | 2 | - (68.9)" in tables.markdown("table6", other_rule)
+    assert "| yolov8n_adapter fusion=2 | 2 | - (68.9)" not in tables.markdown("table6", other_rule, (16.0, 16.0))
+
+
 def record(overrides, seed, sloppiness, fake_map=None):
     """A trial record whose figures and match tables come from scoring a synthetic scene (the same
     24 frames for every row; `sloppiness` scales the box jitter, so larger is worse; another seed
@@ -39,8 +53,8 @@ def record(overrides, seed, sloppiness, fake_map=None):
 
 
 def test_markdown_gives_ours_beside_the_paper_and_the_bootstrap_verdict():
-    adapter = tables.overrides_of(zoo.config("yolov8n_adapter"))
-    fusion2 = tables.overrides_of(tables.fusion_variant(2))
+    adapter = tables.row_overrides(zoo.config("yolov8n_adapter"))
+    fusion2 = tables.row_overrides(tables.fusion_variant(2))
     records = [record(fusion2, 0, 3.0), record(adapter, 0, 0.2), record(adapter, 1, 0.2)]
     text = tables.markdown("table6", records)
     lines = text.splitlines()
@@ -55,8 +69,8 @@ def test_markdown_gives_ours_beside_the_paper_and_the_bootstrap_verdict():
 
 
 def test_a_copy_is_within_noise_and_old_records_say_how_to_get_intervals():
-    fusion2 = tables.overrides_of(tables.fusion_variant(2))
-    fusion3 = tables.overrides_of(tables.fusion_variant(3))
+    fusion2 = tables.row_overrides(tables.fusion_variant(2))
+    fusion3 = tables.row_overrides(tables.fusion_variant(3))
     records = [record(fusion2, 0, 1.0), record(fusion3, 0, 1.0)]
     assert "+0.0 [+0.0, +0.0] within noise" in tables.markdown("table6", records)
     bare = [{k: v for k, v in r.items() if k != "matches"} for r in records]
@@ -69,8 +83,8 @@ def test_unknown_table_is_refused():
 
 
 def test_the_shipped_record_keeps_every_row_s_trials_and_verdicts_without_match_tables():
-    fusion2 = tables.overrides_of(tables.fusion_variant(2))
-    adapter = tables.overrides_of(zoo.config("yolov8n_adapter"))
+    fusion2 = tables.row_overrides(tables.fusion_variant(2))
+    adapter = tables.row_overrides(zoo.config("yolov8n_adapter"))
     records = [record(fusion2, 0, 3.0), record(adapter, 0, 0.2)]
     for r in records:
         r["environment"] = {"versions": {"jax": "0.10.2"}}
@@ -82,5 +96,5 @@ def test_the_shipped_record_keeps_every_row_s_trials_and_verdicts_without_match_
     assert first["metrics"] == records[0]["metrics"] and first["environment"]["versions"]["jax"] == "0.10.2"
     assert "matches" not in first and out["rows"][1]["trials"] == []
     assert out["bootstrap"]["delta"]["yolov8n_adapter"]["ci95"][0] > 0
-    assert out["markdown"] == tables.markdown("table6", records)
+    assert out["markdown"] == tables.markdown("table6", records) and out["assign_small_side"] == [8.0, 16.0]
     json.dumps(out, allow_nan=False)  # plain JSON: it ships in the repository

@@ -30,9 +30,10 @@ SIZES = MultiScale((64, 96), every=1)
 STEPS, SEED = 3, 2  # seed 2 draws sizes 96, 64, 64 for steps 0-2: two sizes, one of them twice
 
 
-def test_one_trace_per_input_size_and_a_resumed_run_is_the_straight_one(tmp_path, monkeypatch):
+def test_one_trace_per_input_size_and_a_resumed_run_is_the_straight_one(tmp_path, monkeypatch, caplog):
+    """Also: the boxes that 4 slots an image cut off reach metrics.jsonl, and one warning."""
     det = zoo.create("shuffle_yolov3", **TINY)
-    targets = functools.partial(pad_batch, class_names=det.config.classes, max_boxes=16)
+    targets = functools.partial(pad_batch, class_names=det.config.classes, max_boxes=4)
     stream = CameraBatchStream(load_camera_images("street", "train", 2, seed=0), 2, SEED, targets, CameraAugment(),
                                SIZES)
     shapes = [stream.input_hw(k) for k in range(STEPS)]
@@ -59,6 +60,11 @@ def test_one_trace_per_input_size_and_a_resumed_run_is_the_straight_one(tmp_path
     rows = {name: [json.loads(l) for l in (tmp_path / name / "metrics.jsonl").read_text().splitlines()]
             for name in ("straight", "resumed")}
     assert [r["step"] for r in rows["resumed"]] == [1, 2, 3] and all(np.isfinite(r["loss"]) for r in rows["straight"])
+    cut_off = [stream.batch(k)["stats"]["dropped_boxes"] for k in range(STEPS)]
+    assert [r["dropped_boxes"] for r in rows["straight"]] == cut_off and cut_off[0] > 0, cut_off
+    warned = [r.getMessage() for r in caplog.records if r.name == "dsfec_jax.train.dropped_boxes"]
+    assert len(warned) == 3 and f"cut off {cut_off[0]} ground-truth box(es)" in warned[0]  # once per train()
+    assert "max_boxes=4" in warned[0]
     np.testing.assert_allclose([r["loss"] for r in rows["resumed"]], [r["loss"] for r in rows["straight"]],
                                rtol=1e-5)
     assert int(resumed["step"]) == int(straight["step"]) == STEPS

@@ -17,7 +17,9 @@ ymax - ymin), one pixel left of ours and one pixel narrower.
 Boxes2D holds float32 (its type): exact for integer pixels below 2**24; the records keep the file's
 values as Python floats. The `difficult` flag (missing = 0) goes into Boxes2D.difficult;
 `truncated` (missing = 0) stays in the record. Bad input is a ValueError naming the file (with the
-line number for text files), the field and what was expected. XML is parsed with ElementTree
+line number for text files), the field and what was expected: a bndbox corner more than a margin
+(2 px or 2 % of the side) outside its image, a number float32 cannot hold, an image that does not
+decode (UnreadableImage). Corners a pixel or two outside are kept as written, as voc_eval scores them. XML is parsed with ElementTree
 (expat >= 2.4 refuses entity expansion bombs; external entities are never fetched).
 """
 
@@ -39,6 +41,14 @@ IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 VOC_CLASSES = tuple("aeroplane bicycle bird boat bottle bus car cat chair cow diningtable dog horse motorbike "
                     "person pottedplant sheep sofa train tvmonitor".split())
 DETECTION_COLUMNS = "class_id score x1 y1 x2 y2"
+MAX_IMAGE_SIDE = 65535  # JPEG's limit: a larger <size> is a broken file, not an image
+# VOC's corners lie in 1..width and 1..height, yet a few files are a pixel or two off (xmin 0,
+# xmax width + 1); voc_eval scores those as written, so they are kept. A corner further out than
+# this margin (the larger of the two) is a broken annotation.
+OFF_IMAGE_MARGIN_PX, OFF_IMAGE_MARGIN_FRACTION = 2.0, 0.02
+# detection files carry no image size: coordinates past this are broken (and would not fit float32)
+MAX_DETECTION_COORDINATE = 1e6
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -135,15 +145,15 @@ def read_annotation(path) -> VocAnnotation:
         raise ValueError(f"{path}: root element is <{root.tag}>; expected <annotation>")
     size = _child(root, "size", path)
     depth = size.find("depth")
-    objects = tuple(_object(o, f"object[{i}]", path) for i, o in enumerate(root.findall("object")))
-    return VocAnnotation(path.stem, _text(root, "filename", path),
-                         _int(size, "width", "size", path), _int(size, "height", "size", path),
+    width, height = (_int(size, k, "size", path, maximum=MAX_IMAGE_SIDE) for k in ("width", "height"))
+    objects = tuple(_object(o, f"object[{i}]", path, (width, height)) for i, o in enumerate(root.findall("object")))
+    return VocAnnotation(path.stem, _text(root, "filename", path), width, height,
                          None if depth is None else _int(size, "depth", "size", path, minimum=0), objects)
 
 
-def _object(node: ET.Element, where: str, path: Path) -> VocObject:
+def _object(node: ET.Element, where: str, path: Path, image_wh: tuple[int, int]) -> VocObject:
     box = _child(node, "bndbox", path, where)
-    xmin, ymin, xmax, ymax = (_number(box, k, f"{where}.bndbox", path) for k in ("xmin", "ymin", "xmax", "ymax"))
+    xmin, ymin, xmax, ymax = (_corner(box, k, f"{where}.bndbox", path, image_wh) for k in ("xmin", "ymin", "xmax", "ymax"))
     if xmin > xmax or ymin > ymax:
         raise ValueError(f"{path}: {where}.bndbox: expected xmin <= xmax and ymin <= ymax; "
                          f"got ({xmin:g}, {ymin:g}, {xmax:g}, {ymax:g})")
@@ -169,10 +179,22 @@ def _number(node: ET.Element, tag: str, where: str, path: Path) -> float:
     return _field(_text(node, tag, path, where), f"{where}.{tag}", str(path))
 
 
-def _int(node: ET.Element, tag: str, where: str, path: Path, minimum: int = 1) -> int:
+def _corner(box: ET.Element, tag: str, where: str, path: Path, image_wh: tuple[int, int]) -> float:
+    """A bndbox corner, within the image give or take the off-by-a-pixel margin (kept as written)."""
+    value = _number(box, tag, where, path)
+    side = image_wh[1] if tag.startswith("y") else image_wh[0]
+    margin = max(OFF_IMAGE_MARGIN_PX, OFF_IMAGE_MARGIN_FRACTION * side)
+    if not 1 - margin <= value <= side + margin:
+        raise ValueError(f"{path}: {where}.{tag}: {value:g} lies outside the {image_wh[0]} x {image_wh[1]} image "
+                         f"(expected 1..{side}, give or take {margin:g} px)")
+    return value
+
+
+def _int(node: ET.Element, tag: str, where: str, path: Path, minimum: int = 1, maximum: int | None = None) -> int:
     text = _text(node, tag, path, where)
-    if not (text.isascii() and text.isdigit()) or int(text) < minimum:
-        raise ValueError(f"{path}: {where}.{tag}: expected an integer >= {minimum}; got {text!r:.40}")
+    if not (text.isascii() and text.isdigit()) or int(text) < minimum or (maximum is not None and int(text) > maximum):
+        expected = f"an integer >= {minimum}" if maximum is None else f"an integer in {minimum}..{maximum}"
+        raise ValueError(f"{path}: {where}.{tag}: expected {expected}; got {text!r:.40}")
     return int(text)
 
 
@@ -205,6 +227,10 @@ def read_detections(path, names: Sequence[str]) -> tuple[VocDetection, ...]:
             raise ValueError(f"{where}: class_id: expected an integer in 0..{len(names) - 1} (a line of "
                              f"the names file); got {fields[0]!r:.40}")
         score, *box = (_field(v, k, where) for v, k in zip(fields[1:], DETECTION_COLUMNS.split()[1:]))
+        for value, name in zip(box, DETECTION_COLUMNS.split()[2:]):
+            if abs(value) > MAX_DETECTION_COORDINATE:
+                raise ValueError(f"{where}: {name}: {value:g} is no pixel coordinate (expected at most "
+                                 f"{MAX_DETECTION_COORDINATE:g} in size)")
         if box[0] > box[2] or box[1] > box[3]:
             raise ValueError(f"{where}: expected x1 <= x2 and y1 <= y2; got {tuple(box)}")
         out.append(VocDetection(str(names[int(fields[0])]), score, tuple(box)))
@@ -212,12 +238,15 @@ def read_detections(path, names: Sequence[str]) -> tuple[VocDetection, ...]:
 
 
 def _field(text: str, name: str, where: str) -> float:
+    """A finite number that float32 (Boxes2D) holds as a finite number too."""
     try:
         value = float(text)
     except ValueError:
         value = math.nan
     if not math.isfinite(value):
         raise ValueError(f"{where}: {name}: expected a finite number; got {text!r:.40}")
+    if abs(value) > FLOAT32_MAX:
+        raise ValueError(f"{where}: {name}: {text!r:.40} does not fit float32 (at most {FLOAT32_MAX:.3g} in size)")
     return value
 
 
@@ -243,6 +272,11 @@ def image_path(annotation: VocAnnotation, images_dir) -> Path:
     return Path(images_dir) / name
 
 
+class UnreadableImage(ValueError):
+    """An image file that does not decode (truncated, corrupt, not an image); the message names it.
+    Images are decoded on access, so the commands catch it around their loops over images."""
+
+
 def load_image(path) -> np.ndarray:
     """A JPEG/PNG -> (H, W, 3) uint8 RGB (Pillow; grey and palette images are converted)."""
     from PIL import Image, UnidentifiedImageError
@@ -254,7 +288,7 @@ def load_image(path) -> np.ndarray:
         with Image.open(path) as image:
             return np.asarray(image.convert("RGB"))
     except (UnidentifiedImageError, OSError) as e:
-        raise ValueError(f"{path}: not a readable image ({e})") from None
+        raise UnreadableImage(f"{path}: not a readable image ({e})") from None
 
 
 def _files(directory, suffix: str) -> list[Path]:

@@ -22,9 +22,11 @@ k is min(topk, number of anchors) (torch.topk would refuse k > A).
 
 Small boxes: a GT narrower than the finest stride may contain no anchor centre at all and then is
 never learned (range-Doppler boxes are often a few pixels wide). Recent ultralytics releases (the
-`stride` argument of TaskAlignedAssigner, "STAL") widen, for the candidate test only, every side of a
-real GT shorter than stride[0] to stride[1] about its centre. `small_side=(8.0, 16.0)` does the same;
-the default None keeps the YOLOv8-era rule above.
+`stride` argument of TaskAlignedAssigner; 8.4.190's v8DetectionLoss passes the model's strides, so
+stride_val = stride[1] = 16) widen, for the candidate test only, every side of a real GT shorter than
+stride_val to stride_val about its centre: `small_side=(16.0, 16.0)`. `(8.0, 16.0)` widens only the
+sides under 8 px (the rule the shipped RD weights were trained with); the default None keeps the
+YOLOv8-era rule above.
 """
 
 from __future__ import annotations

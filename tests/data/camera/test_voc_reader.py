@@ -108,6 +108,20 @@ def test_images_load_as_rgb(tmp_path):
         voc.load_image(tmp_path / "bad.jpg")
 
 
+def test_a_box_a_pixel_or_two_outside_its_image_is_kept_as_written(tmp_path):
+    # VOC has off-by-one boxes (xmin 0, xmax width + 1); voc_eval scores them as written
+    text = XML.format(extra="").replace("<xmin>1<", "<xmin>0<").replace("<xmax>10<", "<xmax>42<")
+    a = voc.read_annotation(write(tmp_path, "x.xml", text))
+    assert a.objects[0].bbox == (0.0, 2.0, 42.0, 20.0) and np.isfinite(a.boxes().xyxy).all()
+
+
+def test_a_truncated_jpeg_is_an_unreadable_image_naming_the_file(tmp_path, database):
+    whole = (database / "images" / "2007_000027.jpg").read_bytes()
+    (tmp_path / "cut.jpg").write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(voc.UnreadableImage, match="cut.jpg: not a readable image .*truncated"):
+        voc.load_image(tmp_path / "cut.jpg")
+
+
 # --------------------------------------------------------------------------- errors name the file and field
 
 
@@ -122,6 +136,11 @@ def test_images_load_as_rgb(tmp_path):
     (XML.format(extra="").replace("<width>40<", "<width>-40<"), r"size\.width: expected an integer"),
     (XML.format(extra="").replace("<name>dog</name>", ""), r"object\[0\]\.name: missing"),
     ("<root/>", "expected <annotation>"),
+    (XML.format(extra="").replace("<xmax>10<", "<xmax>5000<"),
+     r"object\[0\]\.bndbox\.xmax: 5000 lies outside the 40 x 30 image \(expected 1\.\.40, give or take 2 px\)"),
+    (XML.format(extra="").replace("<ymin>5<", "<ymin>-7<"), r"object\[1\]\.bndbox\.ymin: -7 lies outside"),
+    (XML.format(extra="").replace("<xmax>10<", "<xmax>1e308<"), r"object\[0\]\.bndbox\.xmax: '1e308' does not fit float32"),
+    (XML.format(extra="").replace("<width>40<", "<width>70000<"), r"size\.width: expected an integer in 1\.\.65535"),
 ])
 def test_bad_xml_is_a_value_error_naming_file_and_field(tmp_path, text, match):
     path = write(tmp_path, "bad_file.xml", text)
@@ -139,6 +158,8 @@ def test_bad_xml_is_a_value_error_naming_file_and_field(tmp_path, text, match):
     ("0 nan 1 2 3 4", "bad.txt:2: score"),
     ("0 0.5 1 2 x 4", "bad.txt:2: x2: expected a finite number"),
     ("0 0.5 5 2 3 4", r"bad.txt:2: expected x1 <= x2"),
+    ("0 1e308 1 2 3 4", "bad.txt:2: score: '1e308' does not fit float32"),
+    ("0 0.5 1 2 5e6 4", "bad.txt:2: x2: 5e[+]06 is no pixel coordinate"),
 ])
 def test_bad_detection_lines_are_value_errors_naming_file_and_line(tmp_path, line, match):
     path = write(tmp_path, "bad.txt", f"1 0.9 1 1 5 5\n{line}\n")

@@ -115,6 +115,16 @@ def test_a_difficult_match_is_neither_tp_nor_fp():
     assert one_class_ap(removed, dets, metric="all") == 0.5
 
 
+def test_a_second_match_to_a_difficult_box_is_ignored_too():
+    # voc_eval never marks a difficult box as taken: every match to it, the first or a later one, is
+    # neither TP nor FP (a second match to a non-difficult box is an FP: the next test)
+    gts = {"i": gt([[1, 1, 10, 10], [50, 50, 60, 60]], ["a", "a"], [False, True])}
+    dets = {"i": det([[50, 50, 60, 60], [50, 50, 60, 61], [1, 1, 10, 10]], ["a"] * 3, [0.9, 0.8, 0.7])}
+    result = voc_ap(gts, dets, ["a"], metric="all")  # ignored, ignored, TP: precision 1 at recall 1
+    assert result.npos.tolist() == [1] and result.n_det.tolist() == [3] and result.ap[0] == 1.0
+    assert one_class_ap(gts, dets) == 1.0
+
+
 def test_only_the_best_iou_ground_truth_is_considered():
     # the detection's best ground truth is the difficult one: it is ignored although it also
     # overlaps a non-difficult ground truth by IoU 100/120 > 0.5, which stays unmatched
