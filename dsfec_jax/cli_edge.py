@@ -12,8 +12,8 @@ batch to OUT/batches.jsonl (a killed run resumes), posts it to --server through 
 (edge.uplink: an unreachable server loses nothing), and writes OUT/edge.geojson, edge.csv, edge.png
 and edge.json (per-stage times, frames/s, uplink counts). It exits non-zero, saying why, when a
 batch was not delivered: still queued, rejected, a conflict, or a fatal answer (a wrong --server or
-token: the run stops at once and keeps its batches queued for the next run). Without --frames it runs the street
-benchmark's synthetic drive, whose GPS fixes it uses unless --gps is given.
+token: the run stops at once and keeps its batches queued for the next run). Without --frames it
+runs the street benchmark's synthetic drive, whose GPS fixes it uses unless --gps is given.
 --depth: network (the shipped monodepth weights, or --depth-weights), truth (the synthetic drive's
 exact depth), stereo:DIR (your disparity maps in pixels) or depth:DIR (your depth maps in metres),
 one <frame>.npy or 16-bit <frame>.png per frame. --a: the paper's adjustment coefficient in

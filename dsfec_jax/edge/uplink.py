@@ -188,9 +188,10 @@ class Uplink:
         self.url = self._http.url
         self.spool = Spool(queue_dir, max_queued, max_queued_bytes)
         self.queue_dir = self.spool.folder
-        if self.spool.removed_temporaries:
+        removed = self.spool.removed_temporaries
+        if removed:
             log.warning("%s: removed %d interrupted queue writes (%s): their frames were never recorded as done",
-                        self.queue_dir, len(self.spool.removed_temporaries), ", ".join(self.spool.removed_temporaries[:3]))
+                        self.queue_dir, len(removed), ", ".join(removed[:3]))
         self.timeout_s, self.backoff_s, self.max_backoff_s = timeout_s, backoff_s, max_backoff_s
         self.observer, self.room_wait_s = observer, room_wait_s
         self.counts = {"sent": 0, "duplicate": 0, "retried": 0, "rejected": 0, "conflicts": 0}

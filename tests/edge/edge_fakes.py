@@ -33,7 +33,8 @@ class FakeMap:
     (when set) is answered to every POST instead, `delay_s` before each answer.
     `stored`: batch id -> body; `answers`: every status sent; `auth`: every Authorization header."""
 
-    def __init__(self, token: str | None = None, status: int | None = None, delay_s: float = 0.0, body: bytes | None = None):
+    def __init__(self, token: str | None = None, status: int | None = None, delay_s: float = 0.0,
+                 body: bytes | None = None):
         self.token, self.status, self.delay_s, self.body = token, status, delay_s, body
         self.stored: dict[str, bytes] = {}
         self.answers: list[int] = []

@@ -205,9 +205,10 @@ def test_send_refuses_what_is_not_a_batch_and_removes_interrupted_writes(tmp_pat
 def test_send_never_lists_the_queue_folder_nor_waits_for_the_network(tmp_path, monkeypatch):
     """send() costs its own write whatever the backlog (listing and sorting 50k names cost 2.3 s a
     frame), and the POSTs run in the sender thread (a slow server once stalled the frame loop)."""
+    (tmp_path / "queue").mkdir()
     for i in range(200):  # a backlog left by an earlier run
-        (tmp_path / "queue").mkdir(exist_ok=True)
-        (tmp_path / "queue" / f"{i:012d}_old%3A{1000 + i:06d}.json").write_text(json.dumps(batch(1000 + i, device="old")))
+        old = batch(1000 + i, device="old")
+        (tmp_path / "queue" / f"{i:012d}_old%3A{1000 + i:06d}.json").write_text(json.dumps(old))
     with FakeMap(delay_s=0.4) as server:
         link = Uplink(server.url, tmp_path / "queue", timeout_s=5.0)
         assert len(link.pending()) == 200
