@@ -195,7 +195,9 @@ def run_edge_command(args) -> int:
         except (OSError, ValueError) as err:
             sys.exit(f"dsfec edge: {err}")
     try:
-        summary = run_edge(frames, pipeline, args.out, uplink, info, truth_origin)
+        recording = {"device": args.device,
+                     "source": str(Path(args.frames).resolve()) if args.frames else info["drive"]}
+        summary = run_edge(frames, pipeline, args.out, uplink, info, truth_origin, recording=recording)
     except ValueError as err:  # a batches.jsonl, run.json or queued file changed by hand; a bad depth file
         sys.exit(f"dsfec edge: {err}")
     timing = summary["timing_this_run"]

@@ -99,17 +99,26 @@ def remove_temporaries(out_dir: Path) -> None:
             path.unlink()
 
 
-def run_id(out_dir: Path) -> str:
-    """OUT_DIR/run.json's run id, made (random, 12 hex digits) and written atomically on first use."""
+def run_id(out_dir: Path, recording: dict | None = None) -> str:
+    """OUT_DIR/run.json's run id, made (random, 12 hex digits) and written atomically on first use,
+    with `recording` (what is being recorded: device, source). A resume must record the same thing:
+    frame ids restart with each recording, so resuming drive 0's folder for drive 1 (or as another
+    device) would skip frames that were never computed; that is a ValueError naming the field."""
     path = out_dir / RUN
     if not path.exists():
-        atomic.write_json(path, {"run_id": secrets.token_hex(6)})
+        atomic.write_json(path, {"run_id": secrets.token_hex(6), "recording": recording or {}})
     try:
-        value = json.loads(path.read_bytes()[:4096])["run_id"]
+        stored = json.loads(path.read_bytes()[:65536])
+        value = stored["run_id"]
     except (ValueError, KeyError, TypeError) as e:
         raise ValueError(f"{path}: expected {{\"run_id\": \"<12 hex digits>\"}} ({e})") from None
     if not isinstance(value, str) or not _RUN_ID.match(value):
         raise ValueError(f"{path}: run_id {value!r} is not 12 hex digits")
+    was = stored.get("recording") or {}
+    for key, now in (recording or {}).items():
+        if key in was and was[key] != now:
+            raise ValueError(f"{path}: recording.{key} is {was[key]!r}, this run records {now!r}; "
+                             f"resume with the same settings or choose another --out")
     return value
 
 
@@ -140,16 +149,18 @@ def recover_queued(uplink, logged: list[dict], log) -> list[dict]:
 
 def run_edge(frames: Callable[[frozenset], Iterable], pipeline: EdgePipeline, out_dir: str | Path,
              uplink=None, info: dict | None = None, truth_origin=None,
-             progress: Callable[[int, dict], None] | None = None, flush_s: float = 30.0) -> dict:
+             progress: Callable[[int, dict], None] | None = None, flush_s: float = 30.0,
+             recording: dict | None = None) -> dict:
     """Run (or resume) the edge loop; `frames(skip)` yields the EdgeFrames not in `skip`.
     truth_origin: the synthetic world's ENU origin, to draw its ground-truth objects on the map.
     The loop stops early, with the reason in the summary's "stopped", when the uplink meets a fatal
     answer (a wrong URL or token) or its queue is full; every frame done so far stays logged and
-    queued. Returns the summary written to edge.json."""
+    queued. `recording` (e.g. device and source) must match the out dir's on a resume (run_id).
+    Returns the summary written to edge.json."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     remove_temporaries(out_dir)
-    this_run = run_id(out_dir)
+    this_run = run_id(out_dir, recording)
     batches = done_batches(out_dir)
     seconds, seen, stopped = [], {}, None
     with open(out_dir / BATCHES, "a") as log:

@@ -134,3 +134,18 @@ def test_a_log_line_or_queued_file_changed_by_hand_is_named(tmp_path):
     (out / BATCHES).write_text('{"batch_id": "a", "frame": "0"}\n{"batch_id": \n{"batch_id": "b", "frame": "1"}\n')
     with pytest.raises(ValueError, match=f"{BATCHES} line 2: not a frame batch"):
         run(out, DOWN, 2)
+
+
+def test_resuming_an_out_dir_for_another_recording_is_refused_naming_the_field(tmp_path):
+    """Frame ids restart with each recording: resuming drive 0's folder for drive 1 (or as another
+    device) would skip frames never computed, so run.json's recording must match."""
+    out = tmp_path / "edge"
+    drive0 = {"device": "dev-01", "source": {"index": 0}}
+    run_edge(cheap_frames(2), CheapPipeline(), out, recording=drive0)
+    summary = run_edge(cheap_frames(3), CheapPipeline(), out, recording=drive0)  # the same recording resumes
+    assert summary["frames_resumed"] == 2 and summary["frames_placed"] == 3
+    for changed in ({**drive0, "source": {"index": 1}}, {**drive0, "device": "dev-02"}):
+        field = next(k for k in changed if changed[k] != drive0[k])
+        with pytest.raises(ValueError, match=f"recording.{field} is"):
+            run_edge(cheap_frames(3), CheapPipeline(), out, recording=changed)
+    assert [b["frame"] for b in done_batches(out)] == frame_ids(3)
