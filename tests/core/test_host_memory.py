@@ -104,6 +104,7 @@ ROOT = Path(__file__).resolve().parents[2]
 LIGHT_ENTRY_POINTS = {
     "dsfec_jax/service/__main__.py",  # the map service
     "dsfec_jax/edge/loadtest.py",  # HTTP clients against a service it starts
+    "experiments/edge_uplink.py",  # the uplink's queue timings against a service it starts
     "dsfec_jax/data/__main__.py", "dsfec_jax/data/camera/street/__main__.py",  # numpy data tools
     "dsfec_jax/data/points/synthetic/__main__.py", "dsfec_jax/data/rd/synthetic/__main__.py",
     "dsfec_jax/metrics/nuscenes.py", "dsfec_jax/metrics/voc.py",  # numpy scorers of files
