@@ -35,6 +35,12 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> None:
         raise
 
 
+def is_temporary(name: str) -> bool:
+    """Whether a file name is one of write_bytes' temporaries ('.<target name>.<random>.tmp'): what
+    a kill between its write and its rename leaves behind."""
+    return name.startswith(".") and name.endswith(".tmp")
+
+
 def sync_dir(directory: str | os.PathLike) -> None:
     """fsync a directory, so the renames and new names in it survive a power loss."""
     fd = os.open(directory, os.O_RDONLY)

@@ -38,7 +38,7 @@ from ..core.provenance import versions
 from ..geo.export import write_drive_outputs
 from ..geo.geodesy import enu_to_geodetic
 from .pipeline import STAGES, EdgePipeline
-from .spool import SpoolFull, batch_id_of, is_temporary, read_queued
+from .spool import SpoolFull, batch_id_of, read_queued
 
 BATCHES = "batches.jsonl"
 RUN = "run.json"
@@ -95,7 +95,7 @@ def truth_objects(seen: dict, origin) -> list[dict]:
 def remove_temporaries(out_dir: Path) -> None:
     """Atomic writes of run.json or the outputs that a kill interrupted before their rename."""
     for path in out_dir.iterdir():
-        if is_temporary(path) and path.is_file():
+        if atomic.is_temporary(path.name) and path.is_file():
             path.unlink()
 
 

@@ -30,7 +30,7 @@ import re
 import urllib.parse
 from pathlib import Path
 
-from ..core.atomic import sync_dir, write_bytes, write_json
+from ..core.atomic import is_temporary, sync_dir, write_bytes, write_json
 
 _QUEUED = re.compile(r"^(\d{12})_(.+)\.json$")
 SET_ASIDE = ("rejected", "conflicts")
@@ -38,11 +38,6 @@ SET_ASIDE = ("rejected", "conflicts")
 
 class SpoolFull(RuntimeError):
     """The spool is at its cap: the batch was not queued (and not recorded as done)."""
-
-
-def is_temporary(path: Path) -> bool:
-    """core/atomic.py's temporaries: '.<target name>.<random>.tmp'."""
-    return path.name.startswith(".") and path.name.endswith(".tmp")
 
 
 def batch_id_of(path: Path) -> str:
@@ -78,7 +73,7 @@ class Spool:
             for entry in entries:
                 if not entry.is_file():
                     continue
-                if entry.name.startswith(".") and entry.name.endswith(".tmp"):  # is_temporary, without a Path
+                if is_temporary(entry.name):
                     os.unlink(entry.path)
                     self.removed_temporaries.append(os.path.relpath(entry.path, self.folder))
                     removed = True

@@ -32,7 +32,6 @@ server. `token`: sent as `Authorization: Bearer <token>`. Environment proxies ar
 
 from __future__ import annotations
 
-import ipaddress
 import json
 import logging
 import random
@@ -44,6 +43,7 @@ from http.client import HTTPConnection, HTTPException, HTTPSConnection
 from pathlib import Path
 from typing import Callable
 
+from ..core.loopback import is_loopback
 from .spool import Spool, SpoolFull, batch_id_of
 
 __all__ = ["Uplink", "SpoolFull"]
@@ -69,13 +69,6 @@ def check_token(token: str) -> str:
         raise ValueError("token: expected 1-4096 characters of letters, digits and -._~+/ (then '='s), "
                          "as a bearer token is (RFC 6750); the token itself is not shown")
     return token
-
-
-def is_loopback(host: str) -> bool:
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return host == "localhost"
 
 
 class _KeepAlive:

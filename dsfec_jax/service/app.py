@@ -46,7 +46,8 @@ from pydantic import ValidationError
 
 from ..geo.geojson import feature_collection, object_features, track_features
 from . import tokens
-from .guards import LOOPBACK_NAMES, BodyGuard, HostAllowList
+from ..core.loopback import LOOPBACK_NAMES
+from .guards import BodyGuard, HostAllowList
 from .schema import FrameBatch, field_errors
 from .store import Conflict, Store
 
@@ -247,4 +248,4 @@ async def _validation_error(request: Request, exc: RequestValidationError) -> JS
     errors = exc.errors()
     in_query = all(err.get("loc", ("body",))[0] in ("query", "path") for err in errors)
     lines = field_errors(errors, drop_prefix=("query",) if in_query else ("body",))
-    return JSONResponse({"detail": "; ".join(lines), "errors": lines}, status_code=400 if in_query else 422)
+    return JSONResponse(_errors(lines), status_code=400 if in_query else 422)

@@ -19,7 +19,6 @@ from __future__ import annotations
 import asyncio
 import json
 
-LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
 
 
 def host_name(header: str) -> str:

@@ -13,7 +13,6 @@ with the connection limits a public socket needs:
 from __future__ import annotations
 
 import asyncio
-import ipaddress
 import logging
 from pathlib import Path
 
@@ -22,7 +21,7 @@ import uvicorn
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from .app import Access, create_app
-from .guards import LOOPBACK_NAMES
+from ..core.loopback import LOOPBACK_NAMES, is_loopback
 
 HEADER_TIMEOUT_S = 10.0
 MAX_HEADER_BYTES = 16 * 1024
@@ -63,15 +62,6 @@ class HeaderDeadlineH11(H11Protocol):
         # moved their_state on, and its body has BodyGuard's deadline)
         if self.conn.their_state is h11.IDLE and not self.transport.is_closing():
             self.transport.close()
-
-
-def is_loopback(host: str) -> bool:
-    if host in LOOPBACK_NAMES:
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def resolve_access(host: str, no_auth: bool = False, reads: str = "auto", allowed_hosts=(), docs: bool = False,

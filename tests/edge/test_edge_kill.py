@@ -15,7 +15,8 @@ from pathlib import Path
 from edge_fakes import FakeMap, frame_ids
 
 from dsfec_jax.edge.run import BATCHES, done_batches
-from dsfec_jax.edge.spool import batch_id_of, is_temporary
+from dsfec_jax.core.atomic import is_temporary
+from dsfec_jax.edge.spool import batch_id_of
 
 CHILD = Path(__file__).resolve().parent / "edge_kill_child.py"
 FRAMES = 30
@@ -65,4 +66,4 @@ def test_kill_9_at_any_instant_loses_no_frame(tmp_path):
     assert json.loads(stdout.splitlines()[-1])["delivered_all"]
     left = [p.name for p in (out / "queue").rglob("*")]
     assert left == [], left                                               # nothing queued, set aside or temporary
-    assert not any(is_temporary(p) for p in out.iterdir() if p.name != BATCHES)
+    assert not any(is_temporary(p.name) for p in out.iterdir() if p.name != BATCHES)
