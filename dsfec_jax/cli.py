@@ -236,7 +236,7 @@ def training_schedule(args, family):
 
 def run_train(args) -> int:
     from .data.points.sources import NoFrames, load_frames
-    from .train.fit import fit
+    from .modalities.points.fit import fit
     from .train.loop import RunMismatch
 
     from . import zoo
@@ -246,13 +246,13 @@ def run_train(args) -> int:
     info = {"command": command_line(args),
             "data": {"source": args.data, "split": args.split}}
     if family.modality == "image":  # classes come from the data, so the overrides are checked there
-        from . import cli_camera
+        from .modalities.image import cli as cli_camera
         return cli_camera.train(args, parse_overrides(args.set), sched, info)
     if args.sizes or args.size:
         sys.exit(f"dsfec train: --sizes and --size apply to camera models; {args.model!r} is a "
                  f"{family.modality!r} model")
     if family.modality == "rd":
-        from . import cli_rd
+        from .modalities.rd import cli as cli_rd
         return cli_rd.train(args, checked_overrides(args.model, parse_overrides(args.set)), sched, info)
     overrides = checked_overrides(args.model, {"max_pillars": args.max_pillars or RUN_PILLARS,
                                                **parse_overrides(args.set)})
@@ -275,15 +275,15 @@ def run_eval_or_predict(args) -> int:
     from . import zoo
     from .data.points.sources import NoFrames, load_frames
     from .cli_report import print_scores
-    from .evaluate import predict_frames
+    from .modalities.points.evaluate import predict_frames
 
     if is_camera(args.model):  # classes come from the weights' run, so the overrides are checked there
-        from . import cli_camera
+        from .modalities.image import cli as cli_camera
         return cli_camera.eval_or_predict(args, parse_overrides(args.set))
     if args.size is not None:
         sys.exit(f"dsfec {args.command}: --size applies to camera models; {args.model!r} is not one")
     if is_rd(args.model):
-        from . import cli_rd
+        from .modalities.rd import cli as cli_rd
         return cli_rd.eval_or_predict(args, checked_overrides(args.model, parse_overrides(args.set)))
     threshold = POINT_SCORE_THRESHOLD if args.score_threshold is None else args.score_threshold
     if args.runtime == "onnx":
@@ -317,7 +317,7 @@ def write_predictions(args, frames, detections, predictor) -> None:
     results = {token: boxes_to_entries(token, d.boxes, d.scores) for token, d in detections.items()}
     write_submission(args.out, results)
     if args.gt_out:
-        from .evaluate import in_grid
+        from .modalities.points.evaluate import in_grid
         grid = predictor.spec.grid  # the boxes the metric scores: those on the model's grid
         gt = {f.frame_id: boxes_to_entries(f.frame_id, in_grid(f.boxes, grid)) for f in (frames[i] for i in range(len(frames)))}
         write_submission(args.gt_out, gt, is_gt=True)
@@ -352,7 +352,7 @@ def ship_source(args) -> tuple[Path, dict]:
 
 def ship_point_predictor(model: str, source: Path, info: dict):
     from . import zoo
-    from .predict import Predictor
+    from .modalities.points.predict import Predictor
 
     # measure with the pillar slots the run validated with (RadarNeXt runs set their own)
     max_pillars = info.get("overrides", {}).get("max_pillars", RUN_PILLARS)
@@ -365,15 +365,15 @@ def run_ship(args) -> int:
     from . import zoo
     from .core import checkpoint
     from .core.provenance import versions
-    from .evaluate import measure_benchmark
+    from .modalities.points.evaluate import measure_benchmark
 
     family = model_family(args.model)
     source, info = ship_source(args)
     if family.modality == "rd":
-        from . import cli_rd
+        from .modalities.rd import cli as cli_rd
         predictor, variables = cli_rd.ship_predictor(args.model, source, info)
     elif family.modality == "image":
-        from . import cli_camera
+        from .modalities.image import cli as cli_camera
         predictor, variables = cli_camera.ship_predictor(args.model, source, info)
     else:
         predictor, variables = ship_point_predictor(args.model, source, info)
@@ -393,12 +393,12 @@ def run_export(args) -> int:
     from .deploy import export
 
     if is_camera(args.model):
-        from . import cli_camera
+        from .modalities.image import cli as cli_camera
         return cli_camera.export(args, parse_overrides(args.set), command_line(args))
     if args.size:
         sys.exit(f"dsfec export: --size applies to camera models; {args.model!r} is not one")
     if is_rd(args.model):
-        from . import cli_rd
+        from .modalities.rd import cli as cli_rd
         return cli_rd.export(args, checked_overrides(args.model, parse_overrides(args.set)), command_line(args))
     if args.input_hw:
         sys.exit(f"dsfec export: --input-hw applies to range-Doppler models; {args.model!r} reads point clouds")
@@ -429,10 +429,10 @@ def exported_modality(export_dir: str) -> str:
 def run_quantize(args) -> int:
     modality = exported_modality(args.onnx)
     if modality == "rd":
-        from . import cli_rd
+        from .modalities.rd import cli as cli_rd
         return cli_rd.quantize(args)
     if modality == "image":
-        from . import cli_camera
+        from .modalities.image import cli as cli_camera
         return cli_camera.quantize(args)
     from .data.points.sources import load_frames
     from .deploy.quantize import quantize

@@ -98,7 +98,7 @@ def run_depth(args) -> int:
 
     if args.action == "train":
         from .models.depth import MonodepthConfig
-        from .train.fit_depth import fit_depth
+        from .modalities.image.fit_depth import fit_depth
 
         if not args.run_dir:
             sys.exit("dsfec depth train: --run-dir is required")
@@ -115,7 +115,7 @@ def run_depth(args) -> int:
         print(json.dumps({k: v for k, v in info.items() if k != "losses"}, indent=1))
         return 0
     if args.action == "ship":
-        from .predict_depth import ship_depth_weights
+        from .modalities.image.depth import ship_depth_weights
 
         if not args.run_dir:
             sys.exit("dsfec depth ship: --run-dir is required")
@@ -126,8 +126,8 @@ def run_depth(args) -> int:
         print(json.dumps({k: manifest[k] for k in ("step", "train_command", "sha256")}, indent=1))
         return 0
     from .data.camera.street import StreetConfig, StreetDataset
-    from .predict_depth import load_depth_predictor
-    from .train.fit_depth import evaluate_dense
+    from .modalities.image.depth import load_depth_predictor
+    from .modalities.image.fit_depth import evaluate_dense
 
     predictor = load_depth_predictor(args.weights or DEPTH_WEIGHTS)
     scores = evaluate_dense(predictor, StreetDataset(StreetConfig(), "test", args.seed, args.frames or 50))
@@ -140,7 +140,7 @@ def depth_source(args, baseline_m: float):
 
     kind, _, where = args.depth.partition(":")
     if kind == "network":
-        from .predict_depth import load_depth_predictor
+        from .modalities.image.depth import load_depth_predictor
 
         return ds.NetworkDepth(load_depth_predictor(args.depth_weights or DEPTH_WEIGHTS), baseline_m, args.a)
     if kind == "truth":

@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 
 from . import zoo
-from .evaluate import report
+from .modalities.points.evaluate import report
 
 
 def print_scores(args, items, detections: dict, predictor, noun: str, **extra) -> int:

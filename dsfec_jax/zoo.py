@@ -184,7 +184,7 @@ def trained_fields(path: str | Path, fields) -> dict:
 def load(name: str, /, weights: str | Path | None = None, predictor_options: dict | None = None, **overrides):
     """A ready predictor: `zoo.load("dsfec_s")(points) -> Detections`, `zoo.load("yolov8n")(rd_sample)
     -> Boxes2D`, `zoo.load("shuffle_yolov3")(image) -> Boxes2D` (shipped weights by default)."""
-    from .predict import predictor_for
+    from .modalities.points.predict import predictor_for
 
     path = Path(weights) if weights else shipped_weights(name)
     # fields the training data set (the camera family's classes) come from the weights' run unless given
@@ -195,9 +195,9 @@ def load(name: str, /, weights: str | Path | None = None, predictor_options: dic
     variables = model_variables(detector, path)
     modality = family_of(detector.config).modality
     if modality == "rd":
-        from .predict_rd import RDPredictor
+        from .modalities.rd.predict import RDPredictor
         return RDPredictor(detector, variables, **(predictor_options or {}))
     if modality == "image":
-        from .predict_camera import CameraPredictor
+        from .modalities.image.predict import CameraPredictor
         return CameraPredictor(detector, variables, **(predictor_options or {}))
     return predictor_for(detector, variables, **(predictor_options or {}))

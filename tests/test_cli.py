@@ -138,7 +138,7 @@ def test_empty_inputs_get_an_error_not_a_number(shared_data, tiny_model, tmp_pat
     """The VoD example set has 3 frames: its 'test' split (85-100 %) holds none. Scoring it, or
     asking for 0 frames, must say so instead of returning a score of nothing."""
     from dsfec_jax.data.points.sources import NoFrames, load_frames
-    from dsfec_jax.train.fit import fit
+    from dsfec_jax.modalities.points.fit import fit
     from dsfec_jax.train.schedules import get_schedule
 
     vod = f"vod:{shared_data / 'vod' / 'example_set'}"

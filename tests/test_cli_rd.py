@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from dsfec_jax import cli, cli_rd, zoo
+from dsfec_jax import cli, zoo
+from dsfec_jax.modalities.rd import cli as cli_rd
 from dsfec_jax.boxes.boxes2d import Boxes2D
 from dsfec_jax.data.rd.preview import PREDICTION, render_rd
 from dsfec_jax.data.rd.sources import load_rd_samples
-from dsfec_jax.evaluate_rd import score_rd
+from dsfec_jax.modalities.rd.evaluate import score_rd
 from dsfec_jax.metrics.boxes2d.coco_json import load_coco_dets, load_coco_gt
 
 RD_KEYS = {"mAP50", "mAP50_95", "mAP30", "darod_mAP50"}
@@ -112,7 +113,7 @@ class Recorder:
 @pytest.fixture
 def recorder(monkeypatch, tmp_path):
     from dsfec_jax.data.rd import sources
-    from dsfec_jax.train import fit
+    from dsfec_jax.modalities.points import fit
 
     rec = Recorder()
     monkeypatch.setattr(sources, "load_rd_samples", rec.load)

@@ -11,7 +11,7 @@ from dsfec_jax.data.points.pillarize import pillarize
 from dsfec_jax.boxes.structures import Boxes
 from dsfec_jax.models.dsfec.targets import detector_targets
 from dsfec_jax.core.grid import Grid
-from dsfec_jax.predict import Predictor
+from dsfec_jax.modalities.points.predict import Predictor
 from conftest import tiny
 from builders import toy_frame
 
@@ -88,7 +88,7 @@ def test_predictor_runs_on_the_fewest_slots_that_hold_the_frame():
     each bucket compiles once; a frame that fills more slots takes a larger bucket."""
     from dsfec_jax.data.points.sources import load_frames
     from dsfec_jax.data.points.pillarize import select_columns
-    from dsfec_jax.predict import SLOT_BUCKET, decoded_network, fewest_slots
+    from dsfec_jax.modalities.points.predict import SLOT_BUCKET, decoded_network, fewest_slots
 
     predictor = zoo.load("dsfec_s", max_pillars=8 * SLOT_BUCKET)
     frame = load_frames("synthetic", "test", 1)[0]

@@ -17,7 +17,7 @@ from dsfec_jax.boxes.boxes2d import Boxes2D
 from dsfec_jax.data.camera.images import CameraImage
 from dsfec_jax.models.camera.anchors import YOLOV3_ANCHORS
 from dsfec_jax.models.camera.decode import decode
-from dsfec_jax.predict_camera import CameraPredictor
+from dsfec_jax.modalities.image.predict import CameraPredictor
 
 STREET = ("car", "truck", "bus", "pedestrian", "cyclist")
 

@@ -10,8 +10,8 @@ from dsfec_jax import zoo
 from dsfec_jax.boxes.boxes2d import Boxes2D
 from dsfec_jax.data.rd.representations import RDRepresentation
 from dsfec_jax.data.rd.sources import NoSamples, load_rd_samples
-from dsfec_jax.evaluate_rd import ground_truth, score_rd
-from dsfec_jax.predict_rd import RDPredictor
+from dsfec_jax.modalities.rd.evaluate import ground_truth, score_rd
+from dsfec_jax.modalities.rd.predict import RDPredictor
 
 CLASSES = zoo.config("yolov8n").classes
 

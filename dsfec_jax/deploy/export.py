@@ -22,7 +22,7 @@ import jax
 from .. import zoo
 from ..core import atomic
 from ..core.provenance import versions
-from ..predict import decoder, head_classes
+from ..modalities.points.predict import decoder, head_classes
 
 INPUTS = ("points", "mask", "coords")
 OUTPUTS = ("boxes", "scores", "labels")

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..data.points.pillarize import PillarSpec
 from ..core.grid import Grid
-from ..predict import HostPipeline
+from ..modalities.points.predict import HostPipeline
 
 
 def read_manifest(path: str | Path, modality: str | None = None) -> tuple[Path, dict]:

@@ -265,7 +265,7 @@ def filter_boxes(boxes: Mapping[str, list], class_range: Mapping[str, float] | N
     turns the range filter off) and, with ``drop_empty``, drops boxes whose ``num_pts`` is 0: a GT box no
     lidar or radar point hit cannot be detected. Predictions carry ``num_pts = -1`` and so are never dropped
     by it. Sources without lidar leave ``num_pts`` at -1 rather than count radar points alone (see
-    ``dsfec_jax.evaluate.score``: a radar-only count would drop exactly the objects the radar missed)."""
+    ``dsfec_jax.modalities.points.evaluate.score``: a radar-only count would drop exactly the objects the radar missed)."""
     out = {}
     for tok, lst in boxes.items():
         keep = [b for b in lst if class_range is None or b["detection_name"] not in class_range

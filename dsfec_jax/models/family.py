@@ -19,7 +19,7 @@ Column = tuple[str, str, int]
 class MetricProtocol:
     """How a family's detections are scored, and how its results are reported.
 
-    `name` picks the metric in `dsfec_jax.evaluate.PROTOCOLS` (metrics never import models, so the
+    `name` picks the metric in `dsfec_jax.modalities.points.evaluate.PROTOCOLS` (metrics never import models, so the
     record names the metric rather than holding it). `headline` is the key that ranks candidates
     and keeps the best checkpoint; `columns` lay out its ablation tables; `keep` is what a weights
     manifest records of a validation; `match_class`, if set, is the class whose per-frame matches a

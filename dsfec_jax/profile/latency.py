@@ -43,7 +43,7 @@ def stage_functions(detector, variables, inputs, per_stage: bool = True) -> dict
     """name -> zero-argument callable that runs that stage (jitted, compiled, blocking);
     per_stage=False: the whole network only. Range-Doppler models have their own stages (rd.py),
     camera models theirs (CAMERA_STAGES: the backbone's features, then the YOLOv3 head on them)."""
-    from . import rd
+    from ..modalities.rd import profile as rd
 
     full = jax.jit(detector.apply)
     calls = {"total": lambda: full(variables, inputs)}

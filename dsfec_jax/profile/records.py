@@ -5,7 +5,8 @@ from __future__ import annotations
 import jax
 
 from .. import zoo
-from . import counting, latency, memory, rd
+from . import counting, latency, memory
+from ..modalities.rd import profile as rd
 from ..core.environment import environment
 
 

@@ -59,7 +59,9 @@ from .. import zoo
 from ..core import atomic, host_memory
 from ..core import threads as thread_control
 from ..core.defaults import RUN_PILLARS
-from . import counting, op_breakdown, training_camera, training_rd
+from . import counting, op_breakdown
+from ..modalities.image import train_bench as training_camera
+from ..modalities.rd import train_bench as training_rd
 
 PROGRAMS = ("eval_forward", "train_forward", "fwd_bwd", "step")
 SGEMM_N = 2048
@@ -150,7 +152,7 @@ def training_batches(name: str, overrides: dict, settings: Settings) -> tuple[zo
     from ..data.points.augment import AugmentConfig
     from ..data.points.pillarize import PillarSpec
     from ..data.points.sources import load_frames
-    from ..train.fit import window_detectors
+    from ..modalities.points.fit import window_detectors
 
     cfg = zoo.config(name, **overrides)
     family = zoo.family_of(cfg)

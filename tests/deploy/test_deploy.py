@@ -14,7 +14,7 @@ from dsfec_jax.data.points.pillarize import PillarSpec, pillarize, select_column
 from dsfec_jax.data.points.sources import load_frames
 from dsfec_jax.deploy import OrtPredictor, export
 from dsfec_jax.deploy.export import end_to_end, load_jax_export, map_outputs
-from dsfec_jax.predict import Predictor
+from dsfec_jax.modalities.points.predict import Predictor
 from conftest import tiny
 
 
@@ -177,7 +177,7 @@ def accuracy_change(reference, candidate, frames) -> dict:
     """What quantization changed, with the project's nuScenes metric: the Car mAP change against
     the ground truth (README's INT8 table), and `agreement`, the candidate's Car mAP (%) scored
     against the reference's own detections (score >= 0.2) as ground truth: 100 = the same boxes."""
-    from dsfec_jax.evaluate import headline, predict_frames, score
+    from dsfec_jax.modalities.points.evaluate import headline, predict_frames, score
     from dsfec_jax.metrics import nuscenes
 
     ref, cand = predict_frames(reference, frames), predict_frames(candidate, frames)
@@ -261,7 +261,7 @@ def test_radarnext_exports_fused_with_dcnv3_and_matches_the_branched_jax_network
     import onnxruntime as ort
 
     from conftest import random_variables
-    from dsfec_jax.predict import decoded_network, predictor_for
+    from dsfec_jax.modalities.points.predict import decoded_network, predictor_for
 
     grid = Grid((0.0, 5.12), (-2.56, 2.56), (-3.0, 2.0), 0.16)  # 32 x 32 cells
     det = zoo.create("radarnext_mdfen", grid=grid, max_pillars=128, layer_nums=(2, 2, 2))

@@ -21,11 +21,12 @@ from conftest import random_variables
 from dsfec_jax import cli, zoo
 from dsfec_jax.data.camera.batches import eval_input
 from dsfec_jax.data.camera.sources import load_camera_images
-from dsfec_jax.deploy import OrtCameraPredictor, export_camera, quantize_camera
+from dsfec_jax.deploy import OrtCameraPredictor
+from dsfec_jax.modalities.image import export as export_camera, quantize as quantize_camera
 from dsfec_jax.deploy.bench import timing
 from dsfec_jax.deploy.bench.model_setup import measured_batch_stats
-from dsfec_jax.deploy.ort_camera import graph_input_hw
-from dsfec_jax.predict_camera import CameraPredictor, decoding_network
+from dsfec_jax.modalities.image.ort import graph_input_hw
+from dsfec_jax.modalities.image.predict import CameraPredictor, decoding_network
 
 STREET = ("car", "truck", "bus", "pedestrian", "cyclist")
 TINY = {"widths": (16, 16, 32, 32, 64), "repeats": (1, 1, 1, 1, 1), "head_widths": (16, 32, 64), "head_units": 1,
@@ -163,7 +164,8 @@ def test_the_bench_chains_run_and_agree(tmp_path, monkeypatch):
     detections from JAX and ONNX Runtime; the stand-in variables carry measured batch statistics."""
     import importlib
 
-    from dsfec_jax.deploy.bench import stages, stages_camera, workers
+    from dsfec_jax.deploy.bench import stages, workers
+    from dsfec_jax.modalities.image import bench as stages_camera
 
     setup = importlib.import_module("dsfec_jax.deploy.bench.model_setup")  # the package's name is a function
     # the initial weights without compiling init (~10 s); their batch statistics are still measured

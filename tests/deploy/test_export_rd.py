@@ -13,13 +13,14 @@ from conftest import random_variables
 from dsfec_jax import zoo
 from dsfec_jax.data.rd.representations import RDRepresentation, representations
 from dsfec_jax.data.rd.sources import load_rd_samples
-from dsfec_jax.deploy import OrtRDPredictor, export_rd, quantize_rd
-from dsfec_jax.deploy.bench.stages_rd import compiled_postprocess
-from dsfec_jax.deploy.export_rd import decoded_network
+from dsfec_jax.deploy import OrtRDPredictor
+from dsfec_jax.modalities.rd import export as export_rd, quantize as quantize_rd
+from dsfec_jax.modalities.rd.bench import compiled_postprocess
+from dsfec_jax.modalities.rd.export import decoded_network
 from dsfec_jax.models.yolo_rd.decode_host import NMS, TOP_K, host_detections
-from dsfec_jax.deploy.ort_rd import check_input_size
+from dsfec_jax.modalities.rd.ort import check_input_size
 from dsfec_jax.models.yolo_rd.decode import EVAL_CONF, EVAL_IOU
-from dsfec_jax.predict_rd import RDPredictor
+from dsfec_jax.modalities.rd.predict import RDPredictor
 
 HW = (64, 32)
 REP = RDRepresentation(fit="resize", input_hw=HW)
@@ -143,7 +144,7 @@ def test_host_postprocessing_equals_the_compiled_one_with_ties(kind):
 
 
 def test_bad_exports_and_inputs_are_refused_naming_what_was_expected(tmp_path):
-    from dsfec_jax.deploy.export_rd import export_representation
+    from dsfec_jax.modalities.rd.export import export_representation
 
     (tmp_path / "model.onnx").write_bytes(b"")
     (tmp_path / "deploy.json").write_text(json.dumps({"model": "dsfec_s", "modality": "points"}))

@@ -186,7 +186,7 @@ def test_cli_edge_over_a_folder_with_user_depth(drive, frames, tmp_path, monkeyp
 def test_the_shipped_depth_weights_load_and_record_how_they_were_made():
     from dsfec_jax.cli_edge import DEPTH_WEIGHTS
     from dsfec_jax.core import checkpoint
-    from dsfec_jax.predict_depth import load_depth_variables
+    from dsfec_jax.modalities.image.depth import load_depth_variables
 
     manifest = checkpoint.read_manifest(DEPTH_WEIGHTS)
     assert manifest["train_command"].startswith("dsfec depth train") and manifest["seed"] == 0

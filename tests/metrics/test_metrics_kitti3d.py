@@ -379,7 +379,7 @@ def vod_frames(shared_data):
 
 def as_detections(frames, extra=None):
     """Every ground-truth box as a detection (score 0.9), plus `extra` boxes in the first frame (0.99)."""
-    from dsfec_jax.predict import Detections
+    from dsfec_jax.modalities.points.predict import Detections
 
     out = {f.frame_id: Detections(f.boxes, np.full(len(f.boxes), 0.9)) for f in frames}
     if extra is not None:
@@ -394,7 +394,7 @@ VOD_HEADS = ("pedestrian", "bicycle", "car")
 
 
 def test_score_vod_on_real_vod_frames_follows_the_official_classes_and_corridor(shared_data):
-    from dsfec_jax.evaluate import score_vod
+    from dsfec_jax.modalities.points.evaluate import score_vod
 
     frames = vod_frames(shared_data)
     res = score_vod(frames, as_detections(frames), VOD_GRID, VOD_HEADS)
@@ -408,7 +408,7 @@ def test_score_vod_on_real_vod_frames_follows_the_official_classes_and_corridor(
 def test_score_vod_applies_the_40_px_rule_to_real_vod_frames(shared_data):
     import dataclasses
 
-    from dsfec_jax.evaluate import score_vod
+    from dsfec_jax.modalities.points.evaluate import score_vod
 
     frames = vod_frames(shared_data)
     perfect = score_vod(frames, as_detections(frames), VOD_GRID, VOD_HEADS)
@@ -433,7 +433,7 @@ def test_score_vod_applies_the_40_px_rule_to_real_vod_frames(shared_data):
 def test_score_vod_cameras_by_source(shared_data):
     from dsfec_jax.data.points import kitti
     from dsfec_jax.data.points.sources import load_frames
-    from dsfec_jax.evaluate import _camera
+    from dsfec_jax.modalities.points.evaluate import _camera
 
     vod = vod_frames(shared_data)[0]
     assert set(_camera(vod)) == {"cam_from_sensor", "P2", "image_size"}
@@ -445,7 +445,7 @@ def test_score_vod_cameras_by_source(shared_data):
 
 
 def test_score_vod_of_zero_frames_is_an_error():
-    from dsfec_jax.evaluate import score_vod
+    from dsfec_jax.modalities.points.evaluate import score_vod
 
     with pytest.raises(ValueError, match="no frames"):
         score_vod([], {}, VOD_GRID, VOD_HEADS)

@@ -16,10 +16,10 @@ from builders import build_tiny_nuscenes  # the hand-checked nuScenes table fixt
 from dsfec_jax.data.points import nuscenes as nu
 from dsfec_jax.data.points.frame import Boxes, Frame
 from dsfec_jax.data.points.sources import to_dsfec_frame
-from dsfec_jax.evaluate import score
+from dsfec_jax.modalities.points.evaluate import score
 from dsfec_jax.metrics import nuscenes as nm
 from dsfec_jax.metrics import submission as sub
-from dsfec_jax.predict import Detections
+from dsfec_jax.modalities.points.predict import Detections
 
 F32 = np.float32
 

@@ -121,7 +121,7 @@ def test_fit_trains_radarnext_on_windows_including_empty_ones(tmp_path):
     import json
 
     from dsfec_jax.data.points.sources import load_frames
-    from dsfec_jax.train.fit import fit
+    from dsfec_jax.modalities.points.fit import fit
     from dsfec_jax.train.schedules import get_schedule
 
     frames = load_frames("synthetic4d", "train", 4, features="native")

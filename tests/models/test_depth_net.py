@@ -9,7 +9,7 @@ import pytest
 
 from dsfec_jax.core import atomic
 from dsfec_jax.models.depth import TINY, MonodepthConfig, MonodepthNet, init_variables, post_process_disparity
-from dsfec_jax.predict_depth import MonodepthPredictor, load_depth_predictor, save_depth_weights
+from dsfec_jax.modalities.image.depth import MonodepthPredictor, load_depth_predictor, save_depth_weights
 
 DEFAULT_PARAMS = 2_004_264  # MonodepthConfig(): encoder 16-32-64-128-256, kernels 7-5-3-3-3, top 8
 

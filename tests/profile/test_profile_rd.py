@@ -12,7 +12,8 @@ import pytest
 
 from dsfec_jax import zoo
 from dsfec_jax.data.rd.representations import RDRepresentation
-from dsfec_jax.profile import compare, counting, latency, op_breakdown, rd, training, training_rd, zoo_table
+from dsfec_jax.profile import compare, counting, latency, op_breakdown, training, zoo_table
+from dsfec_jax.modalities.rd import profile as rd, train_bench as training_rd
 from dsfec_jax.profile.records import profile, size_record
 
 TINY_HW = (64, 32)

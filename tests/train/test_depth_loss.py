@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dsfec_jax.train import depth_loss as L
+from dsfec_jax.models.depth import loss as L
 
 W = 16  # a power of two: k / W * W is exactly k, so integer shifts sample exact columns
 

@@ -19,7 +19,7 @@ from dsfec_jax.data.camera.batches import CameraBatchStream, MultiScale
 from dsfec_jax.data.camera.sources import load_camera_images
 from dsfec_jax.models.camera import family as camera_family
 from dsfec_jax.models.camera.targets import pad_batch
-from dsfec_jax.train.fit_camera import multi_scale_for
+from dsfec_jax.modalities.image.fit import multi_scale_for
 from dsfec_jax.train.loop import RunSpec, train
 from dsfec_jax.train.schedules import get_schedule, learning_rate, optimizer
 

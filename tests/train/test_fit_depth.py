@@ -10,8 +10,8 @@ import pytest
 
 from dsfec_jax.data.camera.street import StreetConfig
 from dsfec_jax.models.depth import TINY
-from dsfec_jax.predict_depth import load_depth_predictor, ship_depth_weights
-from dsfec_jax.train.fit_depth import DepthAugment, DepthBatchStream, fit_depth, read_losses, render_pairs
+from dsfec_jax.modalities.image.depth import load_depth_predictor, ship_depth_weights
+from dsfec_jax.modalities.image.fit_depth import DepthAugment, DepthBatchStream, fit_depth, read_losses, render_pairs
 
 STREET = StreetConfig(width=64)  # 64 x 36 frames, area-resized to the tiny net's 64 x 32
 SETUP = dict(config=TINY, frames=6, steps=30, batch_size=2, seed=0, street_config=STREET, progress=False,

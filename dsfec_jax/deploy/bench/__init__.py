@@ -13,8 +13,8 @@ is the worker entry point (`__main__`).
 from .report import markdown, plot, ratios
 from .model_setup import camera_model_setup, model_setup, rd_model_setup
 from .stages import JAX_BATCHES, RUNTIMES, jax_stages, jax_throughput, onnx_graphs, ort_stages
-from .stages_camera import camera_onnx_graph, camera_pipeline
-from .stages_rd import rd_jax_stages, rd_onnx_graph, rd_ort_stages
+from ...modalities.image.bench import camera_onnx_graph, camera_pipeline
+from ...modalities.rd.bench import rd_jax_stages, rd_onnx_graph, rd_ort_stages
 from .timing import CAMERA_STAGES, RD_STAGES, STAGES, camera_chain, chain, rd_chain, time_chains
 from .workers import camera_chains, main, run, worker
 

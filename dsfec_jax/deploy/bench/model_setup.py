@@ -36,7 +36,7 @@ def model_setup(name: str):
     from ...core.defaults import RUN_PILLARS
     from ...data.points.pillarize import select_columns
     from ...data.points.sources import load_frames
-    from ...predict import Predictor
+    from ...modalities.points.predict import Predictor
 
     det = zoo.create(name, max_pillars=RUN_PILLARS)
     variables, label = bench_variables(det, name)

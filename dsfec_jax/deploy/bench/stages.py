@@ -22,7 +22,7 @@ JAX_BATCHES = (1, 2, 4, 8)
 def jax_stages(det, variables, predictor) -> dict:
     """The JAX predictor's network and decode, apart: the network on the fewest pillar slots that
     hold the frame (predict.fewest_slots, as the predictor runs it)."""
-    from ...predict import decoder, fewest_slots
+    from ...modalities.points.predict import decoder, fewest_slots
 
     net = jax.jit(det.apply)
     dec = jax.jit(decoder(det.config, 100))
@@ -35,7 +35,7 @@ def onnx_graphs(det, variables, predictor, workdir: Path, int8: bool, calib_poin
     network graph outputs the leaves of the head-output tree; the decode graph rebuilds the tree
     and runs the family's decoder, so any family's heads pass between the two."""
     from ...data.points.pillarize import PillarSpec, pillarize
-    from ...predict import decoder
+    from ...modalities.points.predict import decoder
     from ..export import INPUTS, grouped, onnx_model
     from ..quantize import quantize_model
 

@@ -23,8 +23,8 @@ import numpy as np
 from ...core import threads as thread_control
 from .model_setup import camera_model_setup, model_setup, rd_model_setup
 from .stages import jax_stages, jax_throughput, onnx_graphs, ort_stages
-from .stages_camera import camera_pipeline
-from .stages_rd import rd_jax_stages, rd_onnx_graph, rd_ort_stages
+from ...modalities.image.bench import camera_pipeline
+from ...modalities.rd.bench import rd_jax_stages, rd_onnx_graph, rd_ort_stages
 from .timing import camera_chain, chain, rd_chain, time_chains
 
 POINT_CALIBRATION_FRAMES = 32  # synthetic train frames, seed 0
@@ -34,7 +34,7 @@ def point_chains(name: str, runtimes: list[str], threads: int, workdir: Path, re
     """runtime -> (chain of a point model, record fields)."""
     from ...data.points.pillarize import PillarSpec, select_columns
     from ...data.points.sources import load_frames
-    from ...predict import decoded_network
+    from ...modalities.points.predict import decoded_network
 
     det, variables, label, points, predictor = model_setup(name)
     spec, out = PillarSpec.of(det.config), {}
@@ -55,7 +55,7 @@ def rd_chains(name: str, runtimes: list[str], threads: int, workdir: Path, repea
     """runtime -> (chain of a range-Doppler model, record fields): the native map, padded as training
     pads it (data/rd representations, fit 'pad'), in one fixed-size graph."""
     from ...data.rd.representations import RDRepresentation, fitted_shape
-    from ...predict_rd import detecting_network
+    from ...modalities.rd.predict import detecting_network
 
     det, variables, label, sample = rd_model_setup(name)
     representation = RDRepresentation()
@@ -81,7 +81,7 @@ def camera_chains(name: str, runtimes: list[str], threads: int, workdir: Path, r
     """runtime -> (chain of a camera model, record fields): one street test image letterboxed as
     CameraPredictor letterboxes it at `size`, into one fixed-size graph for ONNX Runtime.
     `overrides`: config fields (the tests' tiny networks)."""
-    from ...predict_camera import decoding_network, letterbox_shape
+    from ...modalities.image.predict import decoding_network, letterbox_shape
 
     det, variables, label, image = camera_model_setup(name, size, overrides)
     input_hw = letterbox_shape(size, True, image.hw)  # CameraPredictor's rectangle: 256 x 416 at 416

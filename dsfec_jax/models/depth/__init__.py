@@ -3,8 +3,8 @@
     from dsfec_jax.models.depth import MonodepthConfig, MonodepthNet, init_variables
     disps = MonodepthNet(cfg).apply(variables, images)  # 4 scales, finest first, (B, h, w, 2)
 
-Training (the losses, the loop) lives in dsfec_jax.train.depth_loss / fit_depth; the predictor in
-dsfec_jax.predict_depth.
+Training (the losses, the loop) lives in dsfec_jax.models.depth.loss / fit_depth; the predictor in
+dsfec_jax.modalities.image.depth.
 """
 
 from .config import DISPARITY_CHANNELS, NUM_SCALES, TINY, MonodepthConfig

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import jax
 
-from .stages import cached_export
+from ...deploy.bench.stages import cached_export
 
 CALIBRATION_SAMPLES = 32  # synthetic train RD samples, seed 0, as the point bench's 32 frames
 
@@ -38,7 +38,7 @@ def compiled_postprocess(kind: str):
 
 
 def rd_jax_stages(det, variables, input_hw) -> dict:
-    from ..export_rd import decoded_network, input_specs, postprocess_kind
+    from .export import decoded_network, input_specs, postprocess_kind
 
     names = det.config.input_names
     net = jax.jit(lambda v, *maps: decoded_network(det, v)(*maps))
@@ -50,8 +50,8 @@ def rd_jax_stages(det, variables, input_hw) -> dict:
 def rd_onnx_graph(det, variables, workdir: Path, int8: bool, input_hw) -> Path:
     """The export's directory (written once per worker), or its INT8 copy."""
     from ...data.rd.sources import load_rd_samples
-    from ..export_rd import export_rd
-    from ..quantize_rd import quantize_rd
+    from .export import export_rd
+    from .quantize import quantize_rd
 
     return cached_export(workdir, f"{det.name}_rd",
                          lambda out: export_rd(det, variables, out, input_hw=tuple(input_hw), jax_export=False),
@@ -61,7 +61,7 @@ def rd_onnx_graph(det, variables, workdir: Path, int8: bool, input_hw) -> Path:
 
 
 def rd_ort_stages(export_dir: Path, threads: int) -> dict:
-    from ..ort_rd import OrtRDPredictor
+    from .ort import OrtRDPredictor
 
     predictor = OrtRDPredictor(export_dir, threads=threads)
     return {"network_decode": predictor.decoded, "nms": lambda out: predictor.postprocess(*out)}

@@ -27,8 +27,8 @@ import dataclasses
 import jax
 import numpy as np
 
-from .. import zoo
-from . import counting
+from ... import zoo
+from ...profile import counting
 
 LATENCY_STAGES = ("features", "neck", "head")
 FOLDED_CONVENTION = ("ultralytics fuse(): params less every BN's scale (folded into its conv's bias), "

@@ -6,9 +6,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .data.points.frame import Frame
-from .data.points.kitti import VOD_IMAGE_SIZE, VOD_RADAR_TO_CAMERA
-from .metrics import kitti3d, nuscenes, resampling
+from ...data.points.frame import Frame
+from ...data.points.kitti import VOD_IMAGE_SIZE, VOD_RADAR_TO_CAMERA
+from ...metrics import kitti3d, nuscenes, resampling
 from .predict import Detections, Predictor
 
 
@@ -170,25 +170,25 @@ def _report_vod(frames, detections, predictor) -> tuple[dict, str]:
 
 
 def _validate_rd_coco(predictor, samples, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
-    from .evaluate_rd import evaluate_rd
+    from ..rd.evaluate import evaluate_rd
     scores = evaluate_rd(predictor, samples, [c for c in predictor.classes if c in match_classes or
                                               ALL_CLASSES in match_classes])[0]
     return scores, scores.pop("match_tables", {})
 
 
 def _report_rd_coco(samples, detections, predictor) -> tuple[dict, str]:
-    from .evaluate_rd import ground_truth, score_rd, summary
+    from ..rd.evaluate import ground_truth, score_rd, summary
     result = {"protocol": "rd_coco", **score_rd(ground_truth(samples), detections, predictor.classes)}
     return result, summary(result)
 
 
 def _validate_camera_voc(predictor, images, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
-    from .evaluate_camera import evaluate_camera
+    from ..image.evaluate import evaluate_camera
     return evaluate_camera(predictor, images)[0], {}  # no per-image match tables (no bootstrap intervals yet)
 
 
 def _report_camera_voc(images, detections, predictor) -> tuple[dict, str]:
-    from .evaluate_camera import score_images, summary
+    from ..image.evaluate import score_images, summary
     result = {"protocol": "camera_voc", **score_images(images, detections, predictor.classes)}
     return result, summary(result)
 
@@ -223,13 +223,13 @@ def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
     """What a weights manifest records: the family's protocol on `frames` frames of `split` of its
     embedded synthetic benchmark (data seed 0), the keys its protocol keeps."""
     if family.modality == "rd":
-        from .data.rd.sources import load_rd_samples
+        from ...data.rd.sources import load_rd_samples
         data = load_rd_samples(family.benchmark, split, frames, 0)
     elif family.modality == "image":
-        from .data.camera.sources import load_camera_images
+        from ...data.camera.sources import load_camera_images
         data = load_camera_images(family.benchmark, split, frames, 0)
     else:
-        from .data.points.sources import load_frames
+        from ...data.points.sources import load_frames
         data = load_frames(family.benchmark, split, frames, 0, features=family.input_columns)
     scores, _ = validate(family.metric.name, predictor, data)
     return {k: scores[k] for k in family.metric.keep} | {

@@ -12,11 +12,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-from ..data.rd.representations import representations
-from ..data.rd.sample import RDSample
-from .export_rd import representation_of
-from .ort_rd import check_input_size
-from .quantize import batch1_export, write_quantized
+from ...data.rd.representations import representations
+from ...data.rd.sample import RDSample
+from .export import representation_of
+from .ort import check_input_size
+from ...deploy.quantize import batch1_export, write_quantized
 
 
 def calibration_feeds(manifest: dict, samples: Sequence[RDSample], where="calibration") -> list[dict]:

@@ -21,12 +21,12 @@ from typing import Mapping, Sequence
 import jax
 import numpy as np
 
-from . import zoo
-from .boxes.boxes2d import Boxes2D
-from .data.camera.batches import eval_input
-from .data.camera.images import CameraImage
-from .data.camera.letterbox import Affine, network_shape
-from .models.camera.decode import EVAL_SCORE, MAX_DETECTIONS, NMS_IOU, decode, detections, rescale
+from ... import zoo
+from ...boxes.boxes2d import Boxes2D
+from ...data.camera.batches import eval_input
+from ...data.camera.images import CameraImage
+from ...data.camera.letterbox import Affine, network_shape
+from ...models.camera.decode import EVAL_SCORE, MAX_DETECTIONS, NMS_IOU, decode, detections, rescale
 
 
 def decoding_network(detector):

@@ -13,11 +13,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-from ..data.camera.batches import eval_input
-from ..data.camera.images import CameraImage
-from ..models.camera.config import INPUT
-from .ort_camera import graph_input_hw
-from .quantize import batch1_export, write_quantized
+from ...data.camera.batches import eval_input
+from ...data.camera.images import CameraImage
+from ...models.camera.config import INPUT
+from .ort import graph_input_hw
+from ...deploy.quantize import batch1_export, write_quantized
 
 
 def calibration_feeds(manifest: dict, images: Sequence[CameraImage], where="calibration") -> list[dict]:

@@ -8,12 +8,12 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from . import zoo
-from .boxes import priors
-from .boxes.nms import batched_rotated_nms
-from .boxes.structures import Boxes
-from .data.points.frame import Frame
-from .data.points.pillarize import PillarSpec, pillarize, select_columns
+from ... import zoo
+from ...boxes import priors
+from ...boxes.nms import batched_rotated_nms
+from ...boxes.structures import Boxes
+from ...data.points.frame import Frame
+from ...data.points.pillarize import PillarSpec, pillarize, select_columns
 
 
 def head_classes(cfg) -> dict:

@@ -13,15 +13,15 @@ from typing import Sequence
 import jax
 import numpy as np
 
-from . import zoo
-from .boxes.boxes2d import Boxes2D
-from .data.rd.batches import boxes_to_map, rd_eval_inputs
-from .data.rd.representations import RDRepresentation
-from .data.rd.sample import RDSample
-from .models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET, decode, detect
-from .models.yolo_rd.decode_host import NMS, TOP_K, host_detections
-from .models.yolo_rd.decode_v10 import detect_nms_free
-from .models.yolo_rd.net import inference_maps
+from ... import zoo
+from ...boxes.boxes2d import Boxes2D
+from ...data.rd.batches import boxes_to_map, rd_eval_inputs
+from ...data.rd.representations import RDRepresentation
+from ...data.rd.sample import RDSample
+from ...models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET, decode, detect
+from ...models.yolo_rd.decode_host import NMS, TOP_K, host_detections
+from ...models.yolo_rd.decode_v10 import detect_nms_free
+from ...models.yolo_rd.net import inference_maps
 
 OUTPUTS = ("boxes", "scores", "labels", "valid")  # what the compiled post-processing returns, per image
 

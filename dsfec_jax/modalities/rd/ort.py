@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET
-from ..models.yolo_rd.decode_host import host_detections
-from ..predict_rd import RDPipeline
-from .export_rd import OUTPUTS, representation_of
-from .ort import ort_session, read_manifest, run_fixed_batch
+from ...models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET
+from ...models.yolo_rd.decode_host import host_detections
+from .predict import RDPipeline
+from .export import OUTPUTS, representation_of
+from ...deploy.ort import ort_session, read_manifest, run_fixed_batch
 
 
 class OrtRDPredictor(RDPipeline):

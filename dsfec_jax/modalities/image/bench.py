@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .stages import cached_export
+from ...deploy.bench.stages import cached_export
 
 CALIBRATION_IMAGES = 32  # street train images, seed 0, as the RD bench's 32 samples
 
@@ -21,8 +21,8 @@ CALIBRATION_IMAGES = 32  # street train images, seed 0, as the RD bench's 32 sam
 def camera_onnx_graph(det, variables, workdir: Path, int8: bool, input_hw) -> Path:
     """The export's directory (written once per worker), or its INT8 copy."""
     from ...data.camera.sources import load_camera_images
-    from ..export_camera import export_camera
-    from ..quantize_camera import quantize_camera
+    from .export import export_camera
+    from .quantize import quantize_camera
 
     return cached_export(workdir, f"{det.name}_camera",
                          lambda out: export_camera(det, variables, out, input_hw=tuple(input_hw), jax_export=False),
@@ -33,8 +33,8 @@ def camera_onnx_graph(det, variables, workdir: Path, int8: bool, input_hw) -> Pa
 
 def camera_pipeline(det, variables, runtime: str, size: int, workdir: Path, threads: int, input_hw):
     """The CameraPipeline of one runtime: CameraPredictor (jax) or OrtCameraPredictor (onnx, onnx-int8)."""
-    from ...predict_camera import CameraPredictor
-    from ..ort_camera import OrtCameraPredictor
+    from .predict import CameraPredictor
+    from .ort import OrtCameraPredictor
 
     if runtime == "jax":
         return CameraPredictor(det, variables, size=size)

@@ -25,8 +25,8 @@ import json
 import sys
 from pathlib import Path
 
-from . import zoo
-from .models.yolo_rd.decode import EVAL_CONF
+from ... import zoo
+from ...models.yolo_rd.decode import EVAL_CONF
 
 # yolo_quick (train/schedules.py) is "15 epochs over ~1000 synthetic 256x64 samples": 62 batches of
 # 16 an epoch, the 14,880 training frames its CPU timing assumes
@@ -59,7 +59,7 @@ def default_train_samples(data: str) -> int | None:
 def _samples(args, split: str, count: int | None, data: str | None = None) -> list:
     """RD samples of --data (or `data`), or exit with the source's message (it names --data and
     what was expected)."""
-    from .data.rd.sources import NoSamples, load_rd_samples
+    from ...data.rd.sources import NoSamples, load_rd_samples
 
     try:
         return load_rd_samples(data or args.data, split, count, args.seed)
@@ -69,8 +69,8 @@ def _samples(args, split: str, count: int | None, data: str | None = None) -> li
 
 def train(args, overrides: dict, schedule, info: dict) -> int:
     """`dsfec train` of an RD model: fit (which hands it to train.fit_rd) on RD samples."""
-    from .train.fit import fit
-    from .train.loop import RunMismatch
+    from ..points.fit import fit
+    from ...train.loop import RunMismatch
 
     refuse_point_flags(args)
     samples = _samples(args, args.split, args.frames or default_train_samples(args.data))
@@ -88,7 +88,7 @@ def _predictor(args, overrides: dict, score_threshold: float):
     if args.runtime == "onnx":
         if not args.onnx:
             sys.exit("--runtime onnx needs --onnx DIR (written by `dsfec export --model NAME --out DIR`)")
-        from .deploy.ort_rd import OrtRDPredictor
+        from .ort import OrtRDPredictor
 
         try:
             predictor = OrtRDPredictor(args.onnx, score_threshold=score_threshold)
@@ -106,7 +106,7 @@ def _predictor(args, overrides: dict, score_threshold: float):
 
 def eval_or_predict(args, overrides: dict) -> int:
     """`dsfec eval` / `dsfec predict` of an RD model: COCO mAP@50, @50-95, @30 and DAROD mAP@50."""
-    from .cli_report import predict_and_report
+    from ...cli_report import predict_and_report
 
     refuse_point_flags(args)
     threshold = EVAL_CONF if args.score_threshold is None else args.score_threshold
@@ -120,10 +120,9 @@ def write_predictions(args, samples, detections: dict, predictor) -> None:
     """--out: the COCO results list (map pixels; image ids from the sample ids, category ids 1..C in
     the model's class order: metrics/boxes2d/coco_json defaults); --gt-out: the ground truth as a
     COCO object with the same ids, so the pair scores offline; --png-dir: one PNG per sample."""
-    from .core import atomic
-    from .evaluate_rd import ground_truth
-    from .metrics.boxes2d.coco_json import (coco_dets_to_list, coco_gt_to_dict, default_category_ids,
-                                            default_image_ids)
+    from ...core import atomic
+    from .evaluate import ground_truth
+    from ...metrics.boxes2d.coco_json import coco_dets_to_list, coco_gt_to_dict, default_category_ids, default_image_ids
 
     image_ids = default_image_ids([s.sample_id for s in samples])
     category_ids = default_category_ids(predictor.classes)
@@ -144,7 +143,7 @@ def write_predictions(args, samples, detections: dict, predictor) -> None:
 def write_pngs(out_dir: Path, samples, detections: dict, predictor, min_score: float) -> None:
     """<sample id>.png: heatmap and grayscale panels, ground truth in class colours, predictions
     scoring >= min_score in magenta (data/rd/preview)."""
-    from .data.rd.preview import save_rd_png
+    from ...data.rd.preview import save_rd_png
 
     representation = getattr(predictor, "representation", None)
     colormap = representation.colormap if representation is not None else "viridis"
@@ -156,7 +155,7 @@ def write_pngs(out_dir: Path, samples, detections: dict, predictor, min_score: f
 
 def _representation(info: dict):
     """The representation a training run used (run.json), so shipping measures what it trained."""
-    from .data.rd.representations import RDRepresentation
+    from ...data.rd.representations import RDRepresentation
 
     fields = dict(info.get("representation") or {})
     if fields.get("input_hw") is not None:
@@ -167,7 +166,7 @@ def _representation(info: dict):
 def ship_predictor(model: str, source: Path, info: dict):
     """(RDPredictor at the evaluation settings, variables) of a run's checkpoint, built with the
     run's config overrides and representation."""
-    from .predict_rd import RDPredictor
+    from .predict import RDPredictor
 
     det = zoo.create(model, **info.get("overrides", {}))
     variables = zoo.model_variables(det, source)
@@ -191,7 +190,7 @@ def export(args, overrides: dict, command: str) -> int:
     path = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
     if not path.is_file():
         sys.exit(f"no weights at {path}: pass --weights (a trained checkpoint or weights file)")
-    from .deploy.export_rd import export_rd
+    from .export import export_rd
 
     det = zoo.create(args.model, **overrides)
     variables = zoo.model_variables(det, path)
@@ -202,7 +201,7 @@ def export(args, overrides: dict, command: str) -> int:
 
 def quantize(args) -> int:
     """`dsfec quantize` of an RD export: static INT8 calibrated on synthetic RD train samples."""
-    from .deploy.quantize_rd import quantize_rd
+    from .quantize import quantize_rd
 
     samples = _samples(args, "train", args.calib_frames, data="synthetic")
     out = quantize_rd(args.onnx, args.out, samples, calibration=args.calibration)

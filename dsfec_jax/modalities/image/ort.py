@@ -15,11 +15,11 @@ from typing import Mapping
 
 import numpy as np
 
-from ..models.camera.config import INPUT
-from ..models.camera.decode import EVAL_SCORE, MAX_DETECTIONS, NMS_IOU
-from ..predict_camera import CameraPipeline, letterbox_shape
-from .export_camera import OUTPUTS
-from .ort import ort_session, read_manifest, run_fixed_batch
+from ...models.camera.config import INPUT
+from ...models.camera.decode import EVAL_SCORE, MAX_DETECTIONS, NMS_IOU
+from .predict import CameraPipeline, letterbox_shape
+from .export import OUTPUTS
+from ...deploy.ort import ort_session, read_manifest, run_fixed_batch
 
 
 def graph_input_hw(manifest: dict, image_hw, where) -> tuple[int, int]:

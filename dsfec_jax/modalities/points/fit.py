@@ -7,16 +7,16 @@ import dataclasses
 from pathlib import Path
 from typing import Sequence
 
-from .. import zoo
-from ..data.points.augment import AugmentConfig
-from ..data.batches import BatchStream, training_windows
-from ..data.points.frame import Frame
-from ..data.points.pillarize import PillarSpec, pillar_budget
-from ..evaluate import validate as run_validation
-from ..predict import Predictor
-from ..core.provenance import jsonable, versions
-from .loop import RunSpec, train
-from .schedules import Schedule
+from ... import zoo
+from ...data.points.augment import AugmentConfig
+from ...data.batches import BatchStream, training_windows
+from ...data.points.frame import Frame
+from ...data.points.pillarize import PillarSpec, pillar_budget
+from .evaluate import validate as run_validation
+from .predict import Predictor
+from ...core.provenance import jsonable, versions
+from ...train.loop import RunSpec, train
+from ...train.schedules import Schedule
 
 
 def state_variables(state: dict) -> dict:
@@ -56,11 +56,11 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     _check_counts({"training frames": len(frames), "validation frames": len(val), "steps": steps})
     modality = zoo.family_of(zoo.config(model, **overrides)).modality
     if modality == "rd":  # frames are RD samples
-        from .fit_rd import fit_rd
+        from ..rd.fit import fit_rd
         return fit_rd(model, overrides, frames, val, schedule, run_dir, seed, steps, augment, eval_every, run_info,
                       progress, init_variables, match_classes=match_classes)
     if modality == "image":  # frames are camera images; the camera protocol keeps no match tables
-        from .fit_camera import fit_camera
+        from ..image.fit import fit_camera
         return fit_camera(model, overrides, frames, val, schedule, run_dir, seed, steps, augment, eval_every,
                           run_info, progress, init_variables)
     det = zoo.create(model, **overrides)

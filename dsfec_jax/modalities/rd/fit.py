@@ -13,16 +13,16 @@ import dataclasses
 from pathlib import Path
 from typing import Sequence
 
-from .. import zoo
-from ..core.provenance import jsonable
-from ..data.rd.augment import RDAugment
-from ..data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
-from ..data.rd.representations import RDRepresentation
-from ..data.rd.sample import RDSample
-from ..evaluate import validate as run_validation
-from ..predict_rd import RDPredictor
-from .loop import RunSpec, run_record, train
-from .schedules import Schedule
+from ... import zoo
+from ...core.provenance import jsonable
+from ...data.rd.augment import RDAugment
+from ...data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
+from ...data.rd.representations import RDRepresentation
+from ...data.rd.sample import RDSample
+from ..points.evaluate import validate as run_validation
+from .predict import RDPredictor
+from ...train.loop import RunSpec, run_record, train
+from ...train.schedules import Schedule
 
 
 def fit_rd(model: str, overrides: dict, samples: Sequence[RDSample], val: Sequence[RDSample], schedule: Schedule,

@@ -28,12 +28,12 @@ from pathlib import Path
 
 import jax
 
-from ..core.provenance import jsonable
-from ..data.rd.representations import RDRepresentation, fitted_shape
-from ..models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET, decode
-from ..models.yolo_rd.decode_host import NMS, TOP_K
-from ..models.yolo_rd.net import inference_maps
-from .export import write_export
+from ...core.provenance import jsonable
+from ...data.rd.representations import RDRepresentation, fitted_shape
+from ...models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET, decode
+from ...models.yolo_rd.decode_host import NMS, TOP_K
+from ...models.yolo_rd.net import inference_maps
+from ...deploy.export import write_export
 
 OUTPUTS = ("boxes", "scores")  # per anchor: xyxy input pixels, class scores
 
@@ -82,7 +82,7 @@ def export_rd(detector, variables, out_dir: str | Path, source: dict | None = No
     """Write model.onnx, deploy.json and (with `jax_export`) model.jax_export to out_dir -> {name: path}.
     input_hw: the fitted (range rows, Doppler columns) the graph takes; representation: how maps
     reach it (default: pad to input_hw)."""
-    from .. import zoo
+    from ... import zoo
 
     zoo.require_modality(detector.config, "rd", "export_rd")
     cfg = detector.config

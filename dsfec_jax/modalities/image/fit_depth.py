@@ -38,15 +38,14 @@ import numpy as np
 import optax
 from tqdm import tqdm
 
-from ..data.camera.street import StreetConfig, StreetDataset
-from ..metrics.depth.dense import MAX_DEPTH, MIN_DEPTH, depth_errors, mean_errors
-from ..models.depth import MonodepthConfig, MonodepthNet, init_variables
-from ..core import checkpoint
-from ..predict_depth import (WEIGHTS_NAME, MonodepthPredictor, load_depth_variables, resize_image,
-                             save_depth_weights)
-from .depth_loss import MonodepthLoss, monodepth_loss
-from .loop import RunSpec, run_record, train
-from .schedules import Schedule
+from ...data.camera.street import StreetConfig, StreetDataset
+from ...metrics.depth.dense import MAX_DEPTH, MIN_DEPTH, depth_errors, mean_errors
+from ...models.depth import MonodepthConfig, MonodepthNet, init_variables
+from ...core import checkpoint
+from .depth import WEIGHTS_NAME, MonodepthPredictor, load_depth_variables, resize_image, save_depth_weights
+from ...models.depth.loss import MonodepthLoss, monodepth_loss
+from ...train.loop import RunSpec, run_record, train
+from ...train.schedules import Schedule
 
 DECAY_AT = (3 / 5, 4 / 5)   # monodepth_main.py: lr, lr / 2, lr / 4
 DECAY_FACTOR = 0.5

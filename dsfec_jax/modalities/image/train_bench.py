@@ -18,23 +18,23 @@ import functools
 
 import jax
 
-from .. import zoo
+from ... import zoo
 
 
 def class_fields() -> dict:
     """num_classes and class_names of the street benchmark (the fields `dsfec train` sets from it)."""
-    from ..data.camera.sources import source_classes
-    from ..models.camera.family import class_fields as fields_of
+    from ...data.camera.sources import source_classes
+    from ...models.camera.family import class_fields as fields_of
 
     return fields_of(source_classes("street"))
 
 
 def training_batches(name: str, overrides: dict, settings) -> tuple[zoo.Detector, list[dict], int]:
     """(the network a step trains, `settings.distinct_batches` device batches {'inputs', 'targets'}, 1)."""
-    from ..data.camera.augment import CameraAugment
-    from ..data.camera.batches import CameraBatchStream, MultiScale
-    from ..data.camera.sources import load_camera_images
-    from ..models.camera.targets import pad_batch
+    from ...data.camera.augment import CameraAugment
+    from ...data.camera.batches import CameraBatchStream, MultiScale
+    from ...data.camera.sources import load_camera_images
+    from ...models.camera.targets import pad_batch
 
     det = zoo.create(name, **overrides)
     family = zoo.family_of(det.config)

@@ -12,10 +12,10 @@ from __future__ import annotations
 import math
 from typing import Mapping, Sequence
 
-from .boxes.boxes2d import Boxes2D
-from .data.rd.sample import RDSample
-from .metrics.boxes2d.coco import coco_evaluate
-from .metrics.boxes2d.darod import darod_evaluate
+from ...boxes.boxes2d import Boxes2D
+from ...data.rd.sample import RDSample
+from ...metrics.boxes2d.coco import coco_evaluate
+from ...metrics.boxes2d.darod import darod_evaluate
 
 
 def _percent(value: float) -> float | None:

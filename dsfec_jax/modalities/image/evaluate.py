@@ -18,10 +18,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .boxes.boxes2d import Boxes2D
-from .data.camera.images import CameraImage
-from .metrics.boxes2d.coco import coco_evaluate
-from .metrics.boxes2d.voc_ap import voc_ap
+from ...boxes.boxes2d import Boxes2D
+from ...data.camera.images import CameraImage
+from ...metrics.boxes2d.coco import coco_evaluate
+from ...metrics.boxes2d.voc_ap import voc_ap
 
 
 def percent(value) -> float | None:

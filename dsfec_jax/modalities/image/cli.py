@@ -41,10 +41,10 @@ import json
 import sys
 from pathlib import Path
 
-from . import zoo
-from .cli_rd import refuse_point_flags
-from .models.camera.decode import EVAL_SCORE
-from .models.camera.family import FAMILY as CAMERA, class_fields
+from ... import zoo
+from ..rd.cli import refuse_point_flags
+from ...models.camera.decode import EVAL_SCORE
+from ...models.camera.family import FAMILY as CAMERA, class_fields
 
 READS = "whole camera images"
 EVAL_SIZE = 416  # eval / predict: the long side images are letterboxed to (the paper's 416)
@@ -60,7 +60,7 @@ def data_source(args) -> str:
 
 def _images(args, split: str, count: int | None):
     """Images of --data, or exit with the source's message (it names --data and what was expected)."""
-    from .data.camera.sources import NoImages, load_camera_images
+    from ...data.camera.sources import NoImages, load_camera_images
 
     try:
         return load_camera_images(data_source(args), split, count, args.seed)
@@ -69,7 +69,7 @@ def _images(args, split: str, count: int | None):
 
 
 def _source_classes(args) -> tuple[str, ...]:
-    from .data.camera.sources import source_classes
+    from ...data.camera.sources import source_classes
 
     try:
         return source_classes(data_source(args))
@@ -94,7 +94,7 @@ def eval_size(args) -> int:
 
 def parse_sizes(text: str | None):
     """--sizes LOW,HIGH (every multiple of 32 between) or SIZE -> MultiScale; None: the profile's."""
-    from .data.camera.batches import MultiScale
+    from ...data.camera.batches import MultiScale
 
     if text is None:
         return None
@@ -109,8 +109,8 @@ def parse_sizes(text: str | None):
 
 def train(args, overrides: dict, schedule, info: dict) -> int:
     """`dsfec train` of a camera model: fit_camera on the images of --data."""
-    from .train.fit_camera import fit_camera
-    from .train.loop import RunMismatch
+    from .fit import fit_camera
+    from ...train.loop import RunMismatch
 
     refuse_point_flags(args, READS)
     overrides, sizes, size = with_data_classes(args, overrides), parse_sizes(args.sizes), eval_size(args)
@@ -132,9 +132,9 @@ def train(args, overrides: dict, schedule, info: dict) -> int:
 
 def _onnx_predictor(args, score_threshold: float):
     """OrtCameraPredictor of --onnx, renaming the export's classes into --data's."""
-    from .data.camera.sources import class_map
-    from .deploy.ort import read_manifest
-    from .deploy.ort_camera import OrtCameraPredictor
+    from ...data.camera.sources import class_map
+    from ...deploy.ort import read_manifest
+    from .ort import OrtCameraPredictor
 
     if not args.onnx:
         sys.exit("--runtime onnx needs --onnx DIR (written by `dsfec export --model NAME --out DIR`)")
@@ -153,7 +153,7 @@ def _onnx_predictor(args, score_threshold: float):
 
 
 def _predictor(args, overrides: dict, score_threshold: float):
-    from .data.camera.sources import class_map
+    from ...data.camera.sources import class_map
 
     weights = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
     try:  # the classes of the run that made the weights (zoo.load reads them the same way), --set first
@@ -170,8 +170,8 @@ def _predictor(args, overrides: dict, score_threshold: float):
 
 def eval_or_predict(args, overrides: dict) -> int:
     """`dsfec eval` / `dsfec predict` of a camera model: VOC mAP@0.5 (VOC07 and all-point) and COCO AP."""
-    from .cli_report import predict_and_report
-    from .data.camera.voc import UnreadableImage
+    from ...cli_report import predict_and_report
+    from ...data.camera.voc import UnreadableImage
 
     refuse_point_flags(args, READS)
     eval_size(args)
@@ -190,10 +190,10 @@ def eval_or_predict(args, overrides: dict) -> int:
 def write_predictions(args, images, detections: dict, predictor) -> None:
     """--out: the COCO results list (image pixels; category ids 1..C in the predictor's class order);
     --gt-out: the scored ground truth with the same ids (difficult as iscrowd); --png-dir: PNGs."""
-    from .core import atomic
-    from .evaluate_camera import ground_truth
-    from .metrics.boxes2d.coco_json import coco_dets_to_list, default_category_ids, default_image_ids
-    from .metrics.boxes2d.voc_coco import voc_gt_to_coco
+    from ...core import atomic
+    from .evaluate import ground_truth
+    from ...metrics.boxes2d.coco_json import coco_dets_to_list, default_category_ids, default_image_ids
+    from ...metrics.boxes2d.voc_coco import voc_gt_to_coco
 
     ids = [images[i].image_id for i in range(len(images))]
     image_ids, category_ids = default_image_ids(ids), default_category_ids(predictor.classes)
@@ -201,7 +201,7 @@ def write_predictions(args, images, detections: dict, predictor) -> None:
     if args.gt_out:
         atomic.write_json(args.gt_out, voc_gt_to_coco(ground_truth(images, predictor.classes)[0], predictor.classes))
     if args.png_dir:
-        from .data.camera.preview import save_camera_png
+        from ...data.camera.preview import save_camera_png
 
         min_score = PNG_MIN_SCORE if args.png_min_score is None else args.png_min_score
         for i in range(len(images)):
@@ -214,7 +214,7 @@ def write_predictions(args, images, detections: dict, predictor) -> None:
 def ship_predictor(model: str, source: Path, info: dict):
     """(CameraPredictor at the evaluation settings, variables) of a run's checkpoint, built with the
     run's config overrides and evaluation size."""
-    from .predict_camera import CameraPredictor
+    from .predict import CameraPredictor
 
     det = zoo.create(model, **{k: tuple(v) if isinstance(v, list) else v for k, v in info.get("overrides", {}).items()})
     variables = zoo.model_variables(det, source)
@@ -224,7 +224,7 @@ def ship_predictor(model: str, source: Path, info: dict):
 def export_input_hw(args) -> tuple[int, int]:
     """The letterboxed (H, W) to export: --input-hw, else the street frames' rectangle at --size
     (default EVAL_SIZE: 256 x 416); exit when both are given or a side is not a multiple of 32."""
-    from .deploy.export_camera import check_input_hw, street_input_hw
+    from .export import check_input_hw, street_input_hw
 
     if args.input_hw and args.size:
         sys.exit("dsfec export: give --size (the street frames' rectangle at that long side) or --input-hw H,W, "
@@ -240,7 +240,7 @@ def export_input_hw(args) -> tuple[int, int]:
 def export(args, overrides: dict, command: str) -> int:
     """`dsfec export` of a camera model: deploy.export_camera (network + YOLOv3 decode; ONNX and
     jax.export) with the classes of the run that made --weights."""
-    from .deploy.export_camera import export_camera
+    from .export import export_camera
 
     refuse_point_flags(args, READS)
     input_hw = export_input_hw(args)
@@ -260,8 +260,8 @@ def export(args, overrides: dict, command: str) -> int:
 
 def quantize(args) -> int:
     """`dsfec quantize` of a camera export: static INT8 calibrated on letterboxed street train images."""
-    from .data.camera.sources import load_camera_images
-    from .deploy.quantize_camera import quantize_camera
+    from ...data.camera.sources import load_camera_images
+    from .quantize import quantize_camera
 
     try:
         out = quantize_camera(args.onnx, args.out, load_camera_images("street", "train", args.calib_frames, args.seed),

@@ -30,8 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 from PIL import Image
 
-from .core import checkpoint
-from .models.depth import MonodepthConfig, MonodepthNet, init_variables, post_process_disparity
+from ...core import checkpoint
+from ...models.depth import MonodepthConfig, MonodepthNet, init_variables, post_process_disparity
 
 WEIGHTS_FORMAT = "dsfec_jax.monodepth"
 WEIGHTS_NAME = "monodepth.msgpack"  # a finished run's weights: RUN_DIR/monodepth.msgpack

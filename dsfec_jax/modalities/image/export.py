@@ -34,13 +34,13 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from ..boxes.nms2d import MAX_NMS
-from ..core.provenance import jsonable
-from ..data.camera.letterbox import FILL, STRIDE, network_shape
-from ..models.camera.config import INPUT
-from ..models.camera.decode import EVAL_SCORE, MAX_DETECTIONS, NMS_IOU
-from ..predict_camera import decoding_network
-from .export import grouped, write_export
+from ...boxes.nms2d import MAX_NMS
+from ...core.provenance import jsonable
+from ...data.camera.letterbox import FILL, STRIDE, network_shape
+from ...models.camera.config import INPUT
+from ...models.camera.decode import EVAL_SCORE, MAX_DETECTIONS, NMS_IOU
+from .predict import decoding_network
+from ...deploy.export import grouped, write_export
 
 OUTPUTS = ("boxes", "scores")  # per anchor: xyxy input pixels, sigmoid(obj) x sigmoid(cls) per class
 DEFAULT_SIZE = 416  # the paper's input size: street frames go into 256 x 416
@@ -49,7 +49,7 @@ DEFAULT_SIZE = 416  # the paper's input size: street frames go into 256 x 416
 def street_input_hw(size: int = DEFAULT_SIZE) -> tuple[int, int]:
     """(H, W) the street benchmark's frames (16:9, 416 x 234 as rendered) are letterboxed into at long
     side `size`: 256 x 416 at 416."""
-    from ..data.camera.sources import street_config
+    from ...data.camera.sources import street_config
 
     camera = street_config().camera_model()
     return network_shape(size, camera.height / camera.width)
@@ -86,7 +86,7 @@ def export_camera(detector, variables, out_dir: str | Path, source: dict | None 
                   jax_export: bool = True) -> dict[str, Path]:
     """Write model.onnx, deploy.json and (with `jax_export`) model.jax_export to out_dir -> {name: path}.
     input_hw: the letterboxed (H, W) the graph takes (default: the street frames' 256 x 416)."""
-    from .. import zoo
+    from ... import zoo
 
     zoo.require_modality(detector.config, "image", "export_camera")
     hw = check_input_hw(input_hw or street_input_hw())

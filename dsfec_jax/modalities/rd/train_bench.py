@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import jax
 
-from .. import zoo
-from ..data.rd.representations import RDRepresentation
+from ... import zoo
+from ...data.rd.representations import RDRepresentation
 
 # train/fit_rd.py's default: the maps as they are (fit='pad'; 256 x 64 is a multiple of the strides)
 REPRESENTATION = RDRepresentation()
@@ -21,9 +21,9 @@ REPRESENTATION = RDRepresentation()
 
 def training_batches(name: str, overrides: dict, settings) -> tuple[zoo.Detector, list[dict], int]:
     """(the network a step trains, `settings.distinct_batches` device batches {'inputs', 'targets'}, 1)."""
-    from ..data.rd.augment import RDAugment
-    from ..data.rd.batches import RDBatchStream
-    from ..data.rd.sources import load_rd_samples
+    from ...data.rd.augment import RDAugment
+    from ...data.rd.batches import RDBatchStream
+    from ...data.rd.sources import load_rd_samples
 
     det = zoo.create(name, **overrides)
     family = zoo.family_of(det.config)

@@ -24,16 +24,16 @@ import functools
 from pathlib import Path
 from typing import Sequence
 
-from .. import zoo
-from ..data.camera.augment import CameraAugment
-from ..data.camera.batches import DARKNET_FINAL_SIZE, DARKNET_SIZES, CameraBatchStream, MultiScale
-from ..data.camera.images import CameraImage
-from ..evaluate import validate as run_validation
-from ..models.camera.targets import DEFAULT_MAX_BOXES, pad_batch
-from ..predict_camera import CameraPredictor
-from .loop import RunSpec, run_record, train
-from .precise_bn import precise_bn
-from .schedules import Schedule
+from ... import zoo
+from ...data.camera.augment import CameraAugment
+from ...data.camera.batches import DARKNET_FINAL_SIZE, DARKNET_SIZES, CameraBatchStream, MultiScale
+from ...data.camera.images import CameraImage
+from ..points.evaluate import validate as run_validation
+from ...models.camera.targets import DEFAULT_MAX_BOXES, pad_batch
+from .predict import CameraPredictor
+from ...train.loop import RunSpec, run_record, train
+from ...train.precise_bn import precise_bn
+from ...train.schedules import Schedule
 
 MULTI_SCALE = {"yolo3_paper": MultiScale(DARKNET_SIZES, final_size=DARKNET_FINAL_SIZE),
                "yolo3_quick": MultiScale.span(320, 416)}

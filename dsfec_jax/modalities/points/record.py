@@ -1,0 +1,91 @@
+"""The point-cloud modality (DSFEC, RadarNeXt): pillarized radar points, BEV boxes, nuScenes and
+VoD protocols."""
+
+from __future__ import annotations
+
+from ..base import Commands, Modality, Protocol, ZooTable
+
+
+def load_samples(family, source: str, split: str, count: int | None, seed: int):
+    from ...data.points.sources import load_frames
+    return load_frames(source, split, count, seed, features=family.input_columns)
+
+
+def predictor(detector, variables, **options):
+    from .predict import predictor_for
+    return predictor_for(detector, variables, **options)
+
+
+def ort_predictor(export_dir, **options):
+    from ...deploy.ort import OrtPredictor
+    return OrtPredictor(export_dir, **options)
+
+
+def export(detector, variables, out_dir, **options):
+    from ...deploy.export import export as export_points
+    return export_points(detector, variables, out_dir, **options)
+
+
+def quantize(export_dir, out_dir, samples, **options):
+    from ...deploy.quantize import quantize as quantize_points
+    return quantize_points(export_dir, out_dir, samples, **options)
+
+
+def _validate(name):
+    def validate(predictor, samples, match_classes=()):
+        from . import evaluate
+        return evaluate.PROTOCOLS[name][0](predictor, samples, match_classes)
+    return validate
+
+
+def _report(name):
+    def report(samples, detections, predictor):
+        from . import evaluate
+        return evaluate.PROTOCOLS[name][1](samples, detections, predictor)
+    return report
+
+
+def _cli(verb):
+    def call(*args, **kwargs):
+        from ... import cli
+        return getattr(cli, verb)(*args, **kwargs)
+    return call
+
+
+def bench_chains(name, runtimes, threads, workdir, repeats):
+    from ...deploy.bench.workers import point_chains
+    return point_chains(name, runtimes, threads, workdir, repeats)
+
+
+def stage_name(path):
+    from ...profile.counting import stage_of
+    return stage_of(path)
+
+
+def latency_stages(detector, variables, inputs):
+    raise NotImplementedError
+
+
+def train_bench_fields(name, settings):
+    return {"max_pillars": settings.max_pillars}
+
+
+def train_bench_batches(name, overrides, settings):
+    raise NotImplementedError
+
+
+def _zoo_table():
+    from ...profile import zoo_table
+    return ZooTable((zoo_table.START, zoo_table.END), zoo_table.RECORDS, zoo_table.point_rows, zoo_table.POINT_NOTE)
+
+
+MODALITY = Modality(
+    name="points", noun="frame", load_samples=load_samples, predictor=predictor, ort_predictor=ort_predictor,
+    protocols={n: Protocol(_validate(n), _report(n)) for n in ("nuscenes", "vod")},
+    commands=Commands(train=_cli("train_points"), eval_or_predict=_cli("eval_points"), ship_predictor=_cli("ship_point_predictor"),
+                      export=_cli("export_points"), quantize=_cli("quantize_points"), data_fields=lambda args, o: o,
+                      refuse=lambda args, command: None),
+    export=export, quantize=quantize, bench_chains=bench_chains, stage_name=stage_name,
+    latency_stages=latency_stages, train_bench_fields=train_bench_fields, train_bench_batches=train_bench_batches,
+    zoo_table=None,
+)

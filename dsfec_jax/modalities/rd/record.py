@@ -1,0 +1,90 @@
+"""The range-Doppler modality (the YOLO-RD family): RD maps as images, 2D boxes in map cells, COCO AP."""
+
+from __future__ import annotations
+
+from ..base import Commands, Modality, Protocol, ZooTable
+
+
+def load_samples(family, source: str, split: str, count: int | None, seed: int):
+    from ...data.rd.sources import load_rd_samples
+    return load_rd_samples(source, split, count, seed)
+
+
+def predictor(detector, variables, **options):
+    from .predict import RDPredictor
+    return RDPredictor(detector, variables, **options)
+
+
+def ort_predictor(export_dir, **options):
+    from .ort import OrtRDPredictor
+    return OrtRDPredictor(export_dir, **options)
+
+
+def export(detector, variables, out_dir, **options):
+    from .export import export_rd
+    return export_rd(detector, variables, out_dir, **options)
+
+
+def quantize(export_dir, out_dir, samples, **options):
+    from .quantize import quantize_rd
+    return quantize_rd(export_dir, out_dir, samples, **options)
+
+
+def _validate(name):
+    def validate(predictor, samples, match_classes=()):
+        from ..points import evaluate
+        return evaluate.PROTOCOLS[name][0](predictor, samples, match_classes)
+    return validate
+
+
+def _report(name):
+    def report(samples, detections, predictor):
+        from ..points import evaluate
+        return evaluate.PROTOCOLS[name][1](samples, detections, predictor)
+    return report
+
+
+def _cli(verb):
+    def call(*args, **kwargs):
+        from . import cli
+        return getattr(cli, verb)(*args, **kwargs)
+    return call
+
+
+def bench_chains(name, runtimes, threads, workdir, repeats):
+    from ...deploy.bench.workers import rd_chains
+    return rd_chains(name, runtimes, threads, workdir, repeats)
+
+
+def stage_name(path):
+    from ...profile.counting import part_of
+    return part_of(path)
+
+
+def latency_stages(detector, variables, inputs):
+    raise NotImplementedError
+
+
+def train_bench_fields(name, settings):
+    return {}
+
+
+def train_bench_batches(name, overrides, settings):
+    raise NotImplementedError
+
+
+def _zoo_table():
+    from ...profile import zoo_table
+    return ZooTable((zoo_table.START, zoo_table.END), zoo_table.RECORDS, zoo_table.point_rows, zoo_table.POINT_NOTE)
+
+
+MODALITY = Modality(
+    name="rd", noun="sample", load_samples=load_samples, predictor=predictor, ort_predictor=ort_predictor,
+    protocols={n: Protocol(_validate(n), _report(n)) for n in ("rd_coco",)},
+    commands=Commands(train=_cli("train"), eval_or_predict=_cli("eval_or_predict"), ship_predictor=_cli("ship_predictor"),
+                      export=_cli("export"), quantize=_cli("quantize"), data_fields=lambda args, o: o,
+                      refuse=lambda args, command: None),
+    export=export, quantize=quantize, bench_chains=bench_chains, stage_name=stage_name,
+    latency_stages=latency_stages, train_bench_fields=train_bench_fields, train_bench_batches=train_bench_batches,
+    zoo_table=None,
+)
