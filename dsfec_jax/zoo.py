@@ -125,7 +125,7 @@ def deploy(detector: Detector, variables: dict) -> tuple[Detector, dict]:
 def input_columns(name: str) -> str:
     """The point columns variant `name` reads from a source (data.points.sources.load_frames'
     features): a source's own ('native': VoD's 7, TJ4D's 8) or the nuScenes ones ('dsfec')."""
-    return family_of(name).input_columns
+    return family_of(name).points.input_columns
 
 
 def create(name: str, /, **overrides) -> Detector:

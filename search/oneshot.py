@@ -33,8 +33,8 @@ from dsfec_jax.data.batches import BatchStream, collate
 from dsfec_jax.data.prefetch import Prefetcher
 from dsfec_jax.data.points.pillarize import PillarSpec, pillar_budget
 from dsfec_jax.data.points.sources import load_frames
-from dsfec_jax.evaluate import validate
-from dsfec_jax.predict import Predictor
+from dsfec_jax.modalities.points.evaluate import validate
+from dsfec_jax.modalities.points.predict import Predictor
 from dsfec_jax.profile.records import profile
 from dsfec_jax.train.loss_watch import LossWatch, NonFiniteLoss
 from dsfec_jax.train.schedules import optimizer
@@ -171,13 +171,13 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
     family, net, fixed = zoo.family_of(base), hooks(base), recipe.model_overrides()
     overrides = {**supernet_overrides(trials, net.field), **fixed}
     supernet = zoo.create(base, **overrides)
-    frames = load_frames(data, "train", recipe.train_frames, seed=0, features=family.input_columns)
+    frames = load_frames(data, "train", recipe.train_frames, seed=0, features=family.points.input_columns)
     # trained and recalibrated with pillar slots sized to the training frames (pillar_budget: the
     # same inputs, less padding), validated with the recipe's slots
     trainee = zoo.create(base, **{**overrides, "max_pillars": pillar_budget(frames, supernet.config.max_pillars)})
     cfg = trainee.config
-    stream = BatchStream(frames, PillarSpec.of(cfg), family.targets(cfg), recipe.schedule.batch_size, seed,
-                         origin_input=family.origin_input)
+    stream = BatchStream(frames, PillarSpec.of(cfg), family.points.targets(cfg), recipe.schedule.batch_size, seed,
+                         origin_input=family.points.origin_input)
     depths = [jnp.asarray(getattr(zoo.config(base, **t["overrides"], **fixed), net.field), jnp.int32) for t in trials]
     steps = trials[0].get("supernet_steps") or recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
     state, supernet_s, supernet_cpu = _supernet(trainee, stream, depths, recipe, steps, seed,
@@ -185,7 +185,7 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
                                                 initial_variables(trials[0].get("init", "scratch")))
     recalibrate = recalibrator(trainee)
     calib = calibration_batches(stream, PillarSpec.of(cfg))
-    val = load_frames(data, "val", recipe.val_frames, seed=0, features=family.input_columns)
+    val = load_frames(data, "val", recipe.val_frames, seed=0, features=family.points.input_columns)
     predictor = SubnetPredictor(supernet, None, depths[0])
     for trial, depth in zip(trials, depths):
         if trial["key"] not in todo:

@@ -13,7 +13,7 @@ from dsfec_jax.data.points.sources import load_frames
 from dsfec_jax.core.environment import environment
 from dsfec_jax.profile.records import profile
 from dsfec_jax.core.provenance import jsonable
-from dsfec_jax.train.fit import fit
+from dsfec_jax.modalities.points.fit import fit
 
 from . import significance
 from .inherit import describe, initial_variables, source_weights
@@ -122,7 +122,7 @@ def load_data(family, data: str, split: str, count: int):
     if family.modality == "rd":
         from dsfec_jax.data.rd.sources import load_rd_samples
         return load_rd_samples(data, split, count, seed=0)
-    return load_frames(data, split, count, seed=0, features=family.input_columns)
+    return load_frames(data, split, count, seed=0, features=family.points.input_columns)
 
 
 def _fit_trial(trial: dict, trial_dir: Path) -> dict:

@@ -30,12 +30,12 @@ OUTPUTS = ("boxes", "scores", "labels")
 
 def map_outputs(cfg) -> tuple[str, ...]:
     """Names of the head maps `with_maps` adds to the outputs (what parity tests compare)."""
-    return zoo.family_of(cfg).map_outputs(cfg)
+    return zoo.family_of(cfg).points.map_outputs(cfg)
 
 
 def head_maps(cfg, maps: dict) -> tuple:
     """The network's outputs in `map_outputs(cfg)` order (a training-only corner map is left out)."""
-    return zoo.family_of(cfg).head_maps(cfg, maps)
+    return zoo.family_of(cfg).points.head_maps(cfg, maps)
 
 
 def end_to_end(detector, variables, top_k: int = 100, with_maps: bool = False):

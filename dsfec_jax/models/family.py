@@ -77,10 +77,29 @@ class SearchRecipe:
 
 
 # point clouds (pillarized); range-Doppler maps (image-like, 2D boxes in map cells); RGB camera
-# images (2D boxes in image pixels: data/camera, predict_camera, evaluate_camera)
+# images (2D boxes in image pixels); each one's pipeline is dsfec_jax/modalities/<name>/
 MODALITIES = ("points", "rd", "image")
-# the Family fields that only point-cloud families have (pillars, BEV boxes, rotated NMS)
-POINT_FIELDS = ("input_columns", "targets", "decoder", "predictor", "map_outputs", "head_maps")
+
+
+@dataclasses.dataclass(frozen=True)
+class PointParts:
+    """What only a point-cloud family has (pillars, BEV boxes, rotated NMS).
+
+    `input_columns` ("dsfec": every source mapped onto nuScenes' columns; "native": a source's
+    own); `targets(cfg)` -> fn(boxes, grid) -> one frame's target maps; `origin_input` (the
+    network takes each training window's origin as an input, so one compiled step serves every
+    window); `decoder(cfg, top_k)` -> fn(head outputs) -> (boxes, scores, labels) before NMS
+    (boxes: 5 BEV or 7 3D columns); `predictor` (defaults of the host pipeline: top_k, nms_iou,
+    max_boxes); `map_outputs(cfg)` (names of the head maps an export adds) and
+    `head_maps(cfg, outputs)` (those maps, in that order)."""
+
+    input_columns: str
+    targets: Callable[[Any], Callable]
+    decoder: Callable[[Any, int], Callable]
+    predictor: Mapping[str, Any]
+    map_outputs: Callable[[Any], tuple[str, ...]]
+    head_maps: Callable[[Any, Any], tuple]
+    origin_input: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,13 +115,8 @@ class Family:
     Training: `loss(cfg)` -> fn(outputs, targets) -> (loss, parts); `schedules` maps the
     commands' profiles (`--schedule quick|paper`) to train.schedules presets.
     Inference: `head_classes(cfg)` -> {head: classes}.
-    Point families only (POINT_FIELDS; None for others): `input_columns` ("dsfec": every source
-    mapped onto nuScenes' columns; "native": a source's own), `targets(cfg)` -> fn(boxes, grid)
-    -> one frame's target maps, `origin_input` (the network takes each training window's origin
-    as an input, so one compiled step serves every window), `decoder(cfg, top_k)` -> fn(head
-    outputs) -> (boxes, scores, labels) before NMS (boxes: 5 BEV or 7 3D columns); `predictor`
-    (defaults of the host pipeline: top_k, nms_iou, max_boxes); `map_outputs(cfg)` (names of the
-    head maps an export adds) and `head_maps(cfg, outputs)` (those maps, in that order).
+    Point families: `points` (PointParts: columns, targets, decoder, predictor defaults, export
+    maps); the others have none.
     Deploy: `deploy_config` / `deploy_variables` (the inference form; identity when there is none);
     `weight_fields`: config fields a training run sets from its data (the camera family's classes),
     which `zoo.load` reads back from the weights' training record.
@@ -119,13 +133,7 @@ class Family:
     metric: MetricProtocol
     modality: str = "points"
     schedules: Mapping[str, str] = dataclasses.field(default_factory=lambda: {"quick": "quick", "paper": "paper"})
-    input_columns: str | None = None
-    targets: Callable[[Any], Callable] | None = None
-    origin_input: bool = False
-    decoder: Callable[[Any, int], Callable] | None = None
-    predictor: Mapping[str, Any] | None = None
-    map_outputs: Callable[[Any], tuple[str, ...]] | None = None
-    head_maps: Callable[[Any, Any], tuple] | None = None
+    points: PointParts | None = None
     recipes: Mapping[str, SearchRecipe] = dataclasses.field(default_factory=dict)
     axes: Mapping[str, Callable] = dataclasses.field(default_factory=dict)
     supernet: Supernet | None = None
@@ -141,6 +149,5 @@ class Family:
             raise TypeError(f"family {self.name!r}: variants {wrong} are not {self.config_class.__name__}")
         if self.modality not in MODALITIES:
             raise ValueError(f"family {self.name!r}: modality {self.modality!r}; expected one of {MODALITIES}")
-        missing = [f for f in POINT_FIELDS if getattr(self, f) is None]
-        if self.modality == "points" and missing:
-            raise ValueError(f"family {self.name!r}: a point-cloud family needs {missing}")
+        if (self.modality == "points") != (self.points is not None):
+            raise ValueError(f"family {self.name!r}: PointParts are for point-cloud families, and they need them")

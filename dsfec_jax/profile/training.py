@@ -158,16 +158,16 @@ def training_batches(name: str, overrides: dict, settings: Settings) -> tuple[zo
     family = zoo.family_of(cfg)
     used = settings.batch * settings.distinct_batches
     frames = load_frames(family.benchmark, "train", max(used, settings.budget_frames), settings.seed,
-                         features=family.input_columns)
+                         features=family.points.input_columns)
     # slots sized as a training run on this benchmark sizes them (train.fit), not on the few frames timed
     windows = window_detectors(name, overrides, settings.window, frames if settings.size_pillars else None)
     frames = [frames[i] for i in range(used)]
-    stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.targets(cfg), settings.batch,
-                         settings.seed, AugmentConfig(), origin_input=family.origin_input)
+    stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.points.targets(cfg), settings.batch,
+                         settings.seed, AugmentConfig(), origin_input=family.points.origin_input)
     # cycled windows: step s trains window s % n; one network serves all windows only with origin inputs
-    stride = 1 if family.origin_input else len(windows)
+    stride = 1 if family.points.origin_input else len(windows)
     batches = [stream.batch(k * stride) for k in range(settings.distinct_batches)]
-    if not family.origin_input and any(b["window"] != 0 for b in batches):
+    if not family.points.origin_input and any(b["window"] != 0 for b in batches):
         raise RuntimeError("train bench: expected every batch on the first window (BatchStream cycles windows)")
     return windows[0], [jax.device_put({"inputs": b["inputs"], "targets": b["targets"]}) for b in batches], len(windows)
 

@@ -43,8 +43,8 @@ from dsfec_jax import zoo
 from dsfec_jax.core import atomic, checkpoint
 from dsfec_jax.core.environment import environment
 from dsfec_jax.data.rd.sources import load_rd_samples
-from dsfec_jax.evaluate_rd import evaluate_rd
-from dsfec_jax.predict_rd import RDPredictor
+from dsfec_jax.modalities.rd.evaluate import evaluate_rd
+from dsfec_jax.modalities.rd.predict import RDPredictor
 from dsfec_jax.train.loop import checkpoints
 
 from ..journal import Journal

@@ -148,8 +148,8 @@ def point_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path,
     from .spos_points import PointSubnetScorer, train_point_supernet
 
     recipe, family = get_recipe(profile, space.base), zoo.family_of(space.base)
-    frames = load_frames(recipe.data, "train", recipe.train_frames, seed=0, features=family.input_columns)
-    val = load_frames(recipe.data, "val", recipe.val_frames, seed=0, features=family.input_columns)
+    frames = load_frames(recipe.data, "train", recipe.train_frames, seed=0, features=family.points.input_columns)
+    val = load_frames(recipe.data, "val", recipe.val_frames, seed=0, features=family.points.input_columns)
     steps = p.supernet_steps or recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
     det, validator, subnet_inputs, state, stream = train_point_supernet(space, recipe, frames, run_dir / "supernet",
                                                                        steps, seed, progress, load_only=load_only,

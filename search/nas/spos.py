@@ -35,11 +35,11 @@ from dsfec_jax.core.provenance import jsonable, versions
 from dsfec_jax.data.rd.augment import RDAugment
 from dsfec_jax.data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
 from dsfec_jax.data.rd.representations import RDRepresentation
-from dsfec_jax.evaluate_rd import evaluate_rd
+from dsfec_jax.modalities.rd.evaluate import evaluate_rd
 from dsfec_jax.layers.yolo import BN_MOMENTUM
-from dsfec_jax.predict_rd import RDPredictor
+from dsfec_jax.modalities.rd.predict import RDPredictor
 from dsfec_jax.profile import counting
-from dsfec_jax.profile.rd import folded_params
+from dsfec_jax.modalities.rd.profile import folded_params
 from dsfec_jax.train.loop import RunMismatch, RunSpec, checkpoints, train
 from dsfec_jax.train.schedules import Schedule, optimizer
 

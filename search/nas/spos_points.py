@@ -34,8 +34,8 @@ from dsfec_jax.core import checkpoint
 from dsfec_jax.core.provenance import jsonable, versions
 from dsfec_jax.data.batches import BatchStream
 from dsfec_jax.data.points.pillarize import PillarSpec, pillar_budget
-from dsfec_jax.evaluate import validate
-from dsfec_jax.predict import Predictor
+from dsfec_jax.modalities.points.evaluate import validate
+from dsfec_jax.modalities.points.predict import Predictor
 from dsfec_jax.train.loop import RunSpec, train
 from dsfec_jax.train.schedules import optimizer
 from dsfec_jax.train.step import train_step_fn
@@ -129,8 +129,8 @@ def train_point_supernet(space: SearchSpace, recipe, frames, run_dir: str | Path
     det, validator = supernet_detectors(space, recipe, frames, sampling)
     subnet_inputs = PointSubnetInputs(space)
     family, cfg = zoo.family_of(space.base), det.config
-    stream = BatchStream(frames, PillarSpec.of(cfg), family.targets(cfg), recipe.schedule.batch_size, seed,
-                         origin_input=family.origin_input)
+    stream = BatchStream(frames, PillarSpec.of(cfg), family.points.targets(cfg), recipe.schedule.batch_size, seed,
+                         origin_input=family.points.origin_input)
     if load_only:
         return det, validator, subnet_inputs, finished_supernet(run_dir, steps), stream
     spec = RunSpec(Path(run_dir), recipe.schedule, seed, total_steps=steps, stop_at=stop_at, progress=progress)

@@ -45,7 +45,7 @@ def test_no_window_or_augmentation_loses_a_pillar_and_the_kept_slots_are_unchang
     windows = training_windows(TINY_GRID, 20)
     full = [PillarSpec(g, tiny("dsfec_s").config.point_features, 4096, 4) for g in windows]
     small = [dataclasses.replace(s, max_pillars=budget) for s in full]
-    targets = zoo.family_of("dsfec_s").targets(tiny("dsfec_s").config)
+    targets = zoo.family_of("dsfec_s").points.targets(tiny("dsfec_s").config)
     a, b = (BatchStream(fs, specs, targets, batch_size=3, seed=5) for specs in (full, small))
     for step in range(8):  # every window, augmented batches
         x, y = a.batch(step), b.batch(step)
@@ -63,7 +63,7 @@ def test_loss_and_gradients_equal_those_with_every_slot(name, float64):
     # one conv per head keep every kind of layer after the scatter, with fewer of each to compile
     small_net = dict(stage_blocks=(1, 1, 1, 1), head_convs=1)
     big, small = tiny(name, max_pillars=1024, **small_net), tiny(name, max_pillars=budget, **small_net)
-    targets = zoo.family_of(name).targets(big.config)
+    targets = zoo.family_of(name).points.targets(big.config)
     batches = [as_float64(BatchStream(fs, PillarSpec.of(d.config), targets, batch_size=2, seed=1).batch(0))
                for d in (big, small)]
     variables = as_float64(random_variables(big, 0))  # from eval_shape: `init` would compile (~10 s)

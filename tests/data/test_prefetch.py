@@ -17,7 +17,7 @@ WAIT_S = 10  # a worker that should act within this long is broken (the tests ne
 def tiny_stream():
     det = tiny("dsfec_s")
     frames = [toy_frame(np.random.default_rng(i), det.config.grid) for i in range(6)]
-    return BatchStream(frames, PillarSpec.of(det.config), zoo.family_of(det.config).targets(det.config),
+    return BatchStream(frames, PillarSpec.of(det.config), zoo.family_of(det.config).points.targets(det.config),
                        batch_size=2, seed=7)
 
 

@@ -26,7 +26,7 @@ def setting():
     space = get_space("dsfec")
     recipe = get_recipe("smoke", space.base)
     family = zoo.family_of(space.base)
-    frames = load_frames(recipe.data, "train", 8, seed=0, features=family.input_columns)
+    frames = load_frames(recipe.data, "train", 8, seed=0, features=family.points.input_columns)
     return space, recipe, frames
 
 

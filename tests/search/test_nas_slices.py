@@ -72,8 +72,8 @@ def test_train_step_moves_only_the_subnets_blocks(supernet):
     from dsfec_jax.data.points.sources import load_frames
 
     family, cfg = zoo.family_of(space.base), det.config
-    frames = load_frames("synthetic", "train", 2, seed=0, features=family.input_columns)
-    batch = collate(frames, PillarSpec.of(cfg), family.targets(cfg), family.origin_input)
+    frames = load_frames("synthetic", "train", 2, seed=0, features=family.points.input_columns)
+    batch = collate(frames, PillarSpec.of(cfg), family.points.targets(cfg), family.points.origin_input)
     tx = optax.adamw(1e-3, weight_decay=0.1)
     genes = space.encode({**space.decode(space.largest()), "stage2_blocks": 1, "stage3_blocks": 2})
     state = {"params": v["params"], "batch_stats": v["batch_stats"], "opt_state": tx.init(v["params"]),

@@ -271,7 +271,7 @@ def test_recalibration_reads_distinct_frames_and_forgets_the_supernets_running_s
 
     sup = tiny_l(stage_blocks=(1, 2, 1, 1))
     cfg, frames = sup.config, load_frames("synthetic", "train", 10, seed=0)
-    stream = BatchStream(frames, PillarSpec.of(cfg), zoo.family_of(cfg).targets(cfg), 2, 0)
+    stream = BatchStream(frames, PillarSpec.of(cfg), zoo.family_of(cfg).points.targets(cfg), 2, 0)
     batches = oneshot.calibration_batches(stream, PillarSpec.of(cfg))
     assert len(batches) == 5  # one epoch: 10 frames in batches of 2, none twice
     assert sorted(np.concatenate([stream.indices(s) for s in range(5)])) == list(range(10))

@@ -20,7 +20,7 @@ def setup(tmp_path, name, lr=2e-3, total=6, stop_at=None, ckpt_every=2, log_ever
     # a shallower network compiles its init and step faster (each schedule here is its own program)
     det = tiny("dsfec_s", stage_blocks=(1, 1, 1, 1), head_convs=1)
     frames = [toy_frame(np.random.default_rng(i), det.config.grid) for i in range(6)]
-    stream = BatchStream(frames, PillarSpec.of(det.config), zoo.family_of(det.config).targets(det.config),
+    stream = BatchStream(frames, PillarSpec.of(det.config), zoo.family_of(det.config).points.targets(det.config),
                          batch_size=2, seed=7)
     sched = get_schedule("quick", learning_rate=lr, warmup_steps=2, batch_size=2, steps=total)
     spec = RunSpec(tmp_path / name, sched, seed=3, total_steps=total, stop_at=stop_at, log_every=log_every,

@@ -230,7 +230,7 @@ def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
         data = load_camera_images(family.benchmark, split, frames, 0)
     else:
         from ...data.points.sources import load_frames
-        data = load_frames(family.benchmark, split, frames, 0, features=family.input_columns)
+        data = load_frames(family.benchmark, split, frames, 0, features=family.points.input_columns)
     scores, _ = validate(family.metric.name, predictor, data)
     return {k: scores[k] for k in family.metric.keep} | {
         "frames": frames, "data_seed": 0, "data": family.benchmark, "protocol": family.metric.name}

@@ -70,8 +70,8 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
     # A family whose network takes each window's origin as an input (RadarNeXt) trains every
     # window with one compiled step (its 0.16 m grid needs 16 windows of 96 cells); the others
     # (DSFEC) compile one step per window.
-    origin = family.origin_input
-    stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.targets(cfg),
+    origin = family.points.origin_input
+    stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.points.targets(cfg),
                          schedule.batch_size, seed, AugmentConfig() if augment else None,
                          origin_input=origin, window_sampling=window_sampling)
     total = steps or schedule.total_steps(len(frames))

@@ -24,7 +24,7 @@ def head_classes(cfg) -> dict:
 def decoder(cfg, top_k: int):
     """fn(head outputs) -> (boxes, scores, labels): the top-k decoded candidates before NMS
     (what the jitted predictors run after the network, and what `deploy.export` writes to ONNX)."""
-    return zoo.family_of(cfg).decoder(cfg, top_k)
+    return zoo.family_of(cfg).points.decoder(cfg, top_k)
 
 
 def decoded_network(detector, top_k: int):
@@ -106,7 +106,7 @@ class Predictor(HostPipeline):
                  nms_iou: float | None = None, max_boxes: int | None = None):
         cfg = detector.config
         given = {"top_k": top_k, "nms_iou": nms_iou, "max_boxes": max_boxes}
-        options = {**zoo.family_of(cfg).predictor, **{k: v for k, v in given.items() if v is not None}}
+        options = {**zoo.family_of(cfg).points.predictor, **{k: v for k, v in given.items() if v is not None}}
         self.detector, self.variables = detector, variables
         self._setup(PillarSpec.of(cfg), head_classes(cfg), score_threshold, options["nms_iou"], options["max_boxes"])
         self.network = jax.jit(decoded_network(detector, options["top_k"]))

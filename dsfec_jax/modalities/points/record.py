@@ -8,7 +8,7 @@ from ..base import Commands, Modality, Protocol, ZooTable
 
 def load_samples(family, source: str, split: str, count: int | None, seed: int):
     from ...data.points.sources import load_frames
-    return load_frames(source, split, count, seed, features=family.input_columns)
+    return load_frames(source, split, count, seed, features=family.points.input_columns)
 
 
 def predictor(detector, variables, **options):

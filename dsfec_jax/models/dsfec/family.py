@@ -6,7 +6,7 @@ from ...boxes.decode import decode_heads
 from ...boxes.pixor import cell_centres
 from ...core.grid import DSFEC_GRID, Grid
 from ...layers.conv import BN_MOMENTUM
-from ..family import Family, MetricProtocol, SearchRecipe, Supernet
+from ..family import Family, MetricProtocol, PointParts, SearchRecipe, Supernet
 from .loss import LossConfig, detection_loss
 from .net import HEAD_NAMES, DSFECConfig
 from .stem_memory import stem_memory_mb
@@ -84,9 +84,11 @@ RECIPES = {
 
 FAMILY = Family(
     name="dsfec", config_class=DSFECConfig, variants=VARIANTS,
-    input_columns="dsfec", benchmark="synthetic", targets=targets, origin_input=False, loss=loss,
-    head_classes=head_classes, decoder=decoder, predictor={"top_k": 100, "nms_iou": 0.2, "max_boxes": 500},
-    map_outputs=map_outputs, head_maps=head_maps, metric=NUSCENES_PROTOCOL, recipes=RECIPES,
+    benchmark="synthetic", loss=loss, head_classes=head_classes,
+    points=PointParts(input_columns="dsfec", targets=targets, origin_input=False, decoder=decoder,
+                      predictor={"top_k": 100, "nms_iou": 0.2, "max_boxes": 500}, map_outputs=map_outputs,
+                      head_maps=head_maps),
+    metric=NUSCENES_PROTOCOL, recipes=RECIPES,
     axes={**{f"stage{s + 1}_blocks": stage_blocks_axis(s) for s in range(4)}, "stem_filters": stem_filters_axis},
     supernet=Supernet("stage_blocks", supernet_blocks, BN_MOMENTUM), stem_memory=stem_memory_mb,
 )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ...boxes.center_decode import decode_center_head
 from ...core.grid import VOD_GRID, Grid
-from ..family import Family, MetricProtocol, SearchRecipe
+from ..family import Family, MetricProtocol, PointParts, SearchRecipe
 from .center_head import BOX_OUTPUTS
 from .loss import center_head_loss
 from .net import RadarNeXtConfig, deploy_config, deploy_variables
@@ -66,10 +66,11 @@ RECIPES = {
 
 FAMILY = Family(
     name="radarnext", config_class=RadarNeXtConfig, variants=RADARNEXT_VARIANTS,
-    input_columns="native", benchmark="synthetic4d", targets=targets, origin_input=True, loss=loss,
-    head_classes=head_classes, decoder=decoder,
+    benchmark="synthetic4d", loss=loss, head_classes=head_classes,
     # the public config's test settings: 500 decoded candidates, rotated NMS IoU 0.2, 83 boxes a frame
-    predictor={"top_k": 500, "nms_iou": 0.2, "max_boxes": 83},
-    map_outputs=map_outputs, head_maps=head_maps, metric=VOD_PROTOCOL, recipes=RECIPES,
+    points=PointParts(input_columns="native", targets=targets, origin_input=True, decoder=decoder,
+                      predictor={"top_k": 500, "nms_iou": 0.2, "max_boxes": 83}, map_outputs=map_outputs,
+                      head_maps=head_maps),
+    metric=VOD_PROTOCOL, recipes=RECIPES,
     axes={"neck": neck_axis}, deploy_config=deploy_config, deploy_variables=deploy_variables,
 )
