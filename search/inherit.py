@@ -3,7 +3,7 @@
 A recipe with `warm_start` starts every candidate of a *depth* sweep (overrides = the family's
 elastic depth field only, its supernet's `field`: DSFEC's stage_blocks) from the base model's shipped weights: the candidate keeps the first k blocks of each
 stage (Once-for-All's elastic depth), then trains with the recipe. Without it a 2-core `quick`
-profile leaves DSFEC-L at noise-level mAP (0.1-0.4 Car mAP after 150-500 CPU steps from scratch). The price is a bias toward the base's own depth (it starts as the exact
+profile leaves DSFEC-L at noise-level mAP (docs/search.md, "Profiles"). The price is a bias toward the base's own depth (it starts as the exact
 trained network); it is named in every record (`init`) and report. Other axes (stem filters,
 activations) change what the trained weights mean, so they always train from scratch, except
 where the one-shot NAS asks for leading slices (`leading:NAME@SHA`: its width subnets retrained

@@ -47,9 +47,8 @@ from .space import SearchSpaceError
 from .trial import match_classes, measured
 
 # Batch-norm recalibration reads at most this many training batches (one pass over the frames at
-# most). Measured on two saved quick stage-2 supernets: with 8 batches (32 frames) two draws of the
-# calibration frames moved a candidate's Car mAP by up to 1.8 points (rms 1.2) and reordered them;
-# with 64, by at most 0.7 (rms 0.5, mostly a shift shared by every candidate) and never reordered them.
+# most): fewer let the draw of calibration frames reorder the candidates (docs/search.md,
+# "Batch-norm recalibration", has the measurement on two saved quick stage-2 supernets).
 CALIBRATION_BATCHES = 64
 # The supernet's losses stay on the device (train.loss_watch) and are read every this many steps
 # and before the supernet is saved: a non-finite one stops training within this many steps.

@@ -4,8 +4,8 @@
 fits a sweep into ~15 minutes on a 2-core CPU: for DSFEC a 32 m x 32 m grid in front of the
 sensor (64 x 64 cells), 150 steps of batch 4 per trial (a one-shot sweep: three seeds of a
 480-step supernet, `--seeds` and `--supernet-steps` to change them) and 100 validation frames,
-depth sweeps starting from the base's shipped weights (search.inherit); a single seed's mAP
-differences below ~1.5 points are noise (README, "What the quick stage-2 sweep measures"). For
+depth sweeps starting from the base's shipped weights (search.inherit); a single seed's small mAP
+differences are noise (docs/search.md, "What the quick stage-2 sweep measures"). For
 RadarNeXt: the synthetic 4D (View-of-Delft-like) benchmark, RadarNeXt's schedule, 96-cell
 windows of the 0.16 m VoD grid, validation on the whole grid with the VoD 3D AP. `paper` trains
 on the whole grid with the paper's schedule. Sizes and latency are always profiled on the

@@ -8,9 +8,9 @@ so the kept indices are those of the plain greedy pass, not merely close to them
 Ranking and filtering are numpy; the greedy pass itself is one compiled loop
 (`nms_kernel.greedy_keep`, numba) with the exact pair IoU in scalar form. Classes never suppress
 each other, so one pass in global score order keeps what per-class passes keep, already merged.
-On DSFEC-S frames (~300 candidates in 3 classes, ~40 kept) the pass is tens of microseconds, where
-the earlier vectorised numpy version made ~600 numpy calls a frame (0.6 ms with warm caches, ~1.4 ms
-right after the network had run).
+On DSFEC-S frames (~300 candidates in 3 classes, ~40 kept) the earlier vectorised numpy version
+made ~600 numpy calls a frame; the timings before and after are in docs/points-deploy.md, and
+`dsfec bench --models dsfec_s --runtimes jax` prints NMS's time a frame.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 
 Why compiled: a DSFEC-S frame's NMS is a few hundred candidates and a few dozen kept boxes. In
 numpy every step is a separate call, and right after the network has run (cold caches) those
-~600 calls cost ~1.4 ms a frame; here the whole pass is one call.
+~600 calls add up (the timings: docs/points-deploy.md); here the whole pass is one call.
 
 Why the same answers: every IoU is computed with the arithmetic of `rotated_iou` in the same order
 (corners, Sutherland-Hodgman clipping with the same side test, crossing formula and vertex order,

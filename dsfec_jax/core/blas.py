@@ -2,8 +2,9 @@
 
 The host data path (the RD simulator's (256 x K) @ (K x 512) products, a few MFLOP each) gains
 nothing from OpenBLAS's threads, and on a busy 2-core box its spinning workers fight XLA and each
-other: measured 15 maps/s with the default pool against 110-130 with one thread. threadpoolctl
-(the maintained way to cap native pools at run time) costs ~10 us per `with`.
+other (the generator's rate with each pool: docs/range-doppler.md; re-measure: `python -m
+dsfec_jax.data inspect --source rd-synthetic` prints maps/s). threadpoolctl (the maintained way to cap
+native pools at run time) costs little per `with`.
 """
 
 from __future__ import annotations

@@ -1,24 +1,24 @@
 """How the project's commands set up the host memory XLA's CPU client runs in: they restart
 once with glibc tunables (and JAX's CPU dispatch mode) that suit a training step's buffers.
 
-Why: XLA's CPU client allocates each call's temporary buffer afresh (1.6 GB for a DSFEC-L
-training step at batch 8 on 96-cell windows) and frees it after. With glibc's defaults that is
+Why: XLA's CPU client allocates each call's temporary buffer afresh (over a gigabyte for a
+DSFEC-L training step at batch 8 on 96-cell windows) and frees it after. With glibc's defaults that is
 an mmap and a munmap a call, so every step first-touches fresh pages (the kernel zeroes each in a
 page fault, inside whatever op writes it first), and the unmap holds the address-space lock the
 next call's mmap waits on. Two settings answer it:
 - `glibc.malloc.hugetlb=1`: glibc advises the kernel (madvise MADV_HUGEPAGE) to back such
-  mappings with 2 MiB pages, 512x fewer faults and cheaper unmaps. Steady-state train step on
-  the 2-core EPYC: DSFEC-L 1158 -> 863 ms, DSFEC-S 384-414 -> 270-283 ms.
+  mappings with 2 MiB pages, 512x fewer faults and cheaper unmaps.
 - Keeping the buffer in the process: `glibc.malloc.mmap_max=0` (large blocks come from the heap,
   not from mmap) with a trim threshold no heap reaches (freed memory stays), and JAX's
   `jax_cpu_enable_async_dispatch` off, so that XLA runs each call inline on the calling thread.
   Both are needed: an asynchronous call runs on a pool thread, whose glibc arena cannot hold a
   block that large and maps it afresh anyway. The step's inputs must also be ready when it is
   called (train.step.batch_on_device), or XLA defers the call to a pool thread. Then the main
-  thread's heap hands the same pages back every call. `dsfec train`, steady state: kernel time
-  a run ~3.5x lower, steps ~1.1x faster (1.03-1.25x by run; DSFEC-S, DSFEC-L, RadarNeXt-FPN).
-  The cost: the process keeps its peak heap until it exits, as a caching allocator would (the
-  main job's peak RSS 1.86 -> 2.30 GB).
+  thread's heap hands the same pages back every call. The cost: the process keeps its peak heap
+  until it exits, as a caching allocator would.
+The gains and the cost, measured on `dsfec train` and `dsfec bench --train`, are in
+docs/profiler.md ("huge pages", "XLA's temporary buffer kept between steps"); re-measure by
+alternating a command with and without DSFEC_HUGEPAGES=0.
 
 glibc reads its tunables only at start-up, so the settings can only come from the environment
 the process starts with. `relaunch_with_host_settings` execs the same command line again with

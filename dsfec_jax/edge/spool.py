@@ -11,7 +11,8 @@ QUEUE_DIR/
 
 The folder is listed once, when the spool opens; after that an in-memory index (a deque, oldest
 first) answers every question, so queueing a frame costs its write and two fsyncs, whatever the
-backlog (listing and sorting 50k names on every frame cost 2.3 s a frame).
+backlog (listing and sorting the folder on every frame grew with it: docs/edge-and-map-service.md;
+re-measure: `python -m experiments.edge_uplink`).
 
 The spool holds at most `max_files` batches and `max_bytes` bytes. At the cap write() refuses the
 batch (SpoolFull) rather than dropping an older one: nothing already queued is ever lost, and the

@@ -14,23 +14,9 @@ depth from disparity, lateral offset, ENU placement, the exchange format's place
 frame batches), geojson (Features for objects and ego tracks), export (a drive's GeoJSON, CSV
 and PNG), map_png (the top-view map, offline). geo imports only core/ of the project.
 
-Measured on the synthetic street drives (test split, drives 0-4, 300 frames each at 10 Hz, 1 Hz
-fixes; errors against the exact per-frame poses; GPS noise is white, per fix):
-- position (linear interpolation): mean 0.022 m, max 0.30 m without noise (the chord's sagitta
-  on curves); with 1 m and 3 m of noise, mean 0.99 m and 2.97 m (the noise itself).
-- heading, mean / p90 / max in degrees: chord held over its second 0.38 / 0.87 / 5.1, blended
-  between segment middles 0.03 / 0.00 / 2.6 (exact on straights and arcs, off only where the
-  curvature changes). With noise the chord of consecutive fixes is noisy: 1 m: 4.9 / 10.5 / 34
-  (middles), 3 m: 18 / 40 / 173; a chord over one more fix on each side (heading_span=1) gives
-  2.1 / 4.5 / 10 and 6.2 / 12.7 / 30, at 0.12 / 0.34 / 4.5 without noise.
-- placement with the ground-truth depth map (test drives 0-3, 50 frames each, every labelled
-  object, ego from the 1 Hz fixes): horizontal distance to the object's 3D centre within 40 m,
-  mean / median / p90, 1.52 / 1.40 / 2.68 m reading at the centre, 1.96 / 1.75 / 3.07 m at the
-  bottom centre; per class at the centre (not difficult) car 2.37, truck 4.26, bus 5.80,
-  pedestrian 0.20, cyclist 0.38 m mean: the visible surface's offset from the centre, the floor
-  that no depth estimator goes below with this placement. The exact pose instead of the GPS
-  changes these by < 0.02 m; 3 m of GPS noise raises the centre's to 5.76 m (4.13 m with
-  heading_span=2).
+How well the track and placement do on the synthetic street drives (position and heading errors
+of the interpolated track, placement errors with the exact depth) is in docs/edge-and-map-service.md,
+"Track and placement, measured"; `python -m experiments.edge_errors` re-measures placement on a drive.
 """
 
 from .geodesy import (ecef_to_enu, ecef_to_enu_vector, ecef_to_geodetic, enu_to_ecef, enu_to_ecef_vector,

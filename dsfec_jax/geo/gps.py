@@ -18,8 +18,8 @@ Conventions:
   between consecutive fixes has the chord heading atan2(dE, dN). With `heading="midpoint"` (the
   default) that heading belongs to the segment's middle time and frames between two middles get
   the linear blend (the chord of a curve is parallel to the tangent at its middle, so this tracks
-  a turning ego better than holding one chord heading for the whole second; see the measured
-  figures in geo/__init__.py); `heading="chord"` holds the chord heading over its segment.
+  a turning ego better than holding one chord heading for the whole second; the measured errors
+  are in docs/edge-and-map-service.md); `heading="chord"` holds the chord heading over its segment.
   `heading_span` = k draws each segment's chord from fix i - k to fix i + 1 + k instead: noisy
   fixes move a chord's ends by their noise, so a longer chord turns less with it, at the price
   of cutting corners (k = 0, the default, is exact for clean fixes; k = 1 or 2 for metre-level

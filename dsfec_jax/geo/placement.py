@@ -10,7 +10,7 @@ Conventions:
   into the box by BOTTOM_INSET of the box height, and its window is clipped to the box: the bottom
   edge's own pixels are where the road under and beside the object meets its lowest part, the
   boundary a stereo or monocular map smears most, while a tenth of the way up hits the tyres,
-  bumper or feet. Measured with the ground-truth depth of the synthetic drives (geo/__init__.py):
+  bumper or feet. Measured with the ground-truth depth of the synthetic drives (docs/edge-and-map-service.md):
   the road seen *under* a high-floored truck and through a bicycle's frame still reaches this
   read, so the bottom centre places trucks and cyclists worse than the centre does.
 - Either way the depth read is that of the *visible surface*, not of the object's centre: a car

@@ -7,11 +7,11 @@ the same running-average update. Weights move between the two unchanged.
 
 Why a gradient of its own: autodiff of training-mode BN differentiates through the mean and the
 variance separately and leaves XLA's CPU backend several full passes over the activation and a
-few gradient accumulations (`add_any`) besides; on a DSFEC-L training step, BN and the
-activations after it were about a quarter of the op time. The closed form needs two passes: one
+few gradient accumulations (`add_any`) besides. The closed form needs two passes: one
 reduction (sum dy, sum dy * x_hat) and one elementwise pass for dx, into which XLA fuses the
-activation's backward that produces dy. Measured: 1.02-1.03x on the DSFEC-S and -L train steps
-(XLA already fused much of autodiff's form).
+activation's backward that produces dy. The gain is small, as XLA already fuses much of
+autodiff's form; its history is in docs/profiler.md, and
+`dsfec bench --train --compare kernels=plain` re-measures the fast kernels against the textbook ones.
 """
 
 from __future__ import annotations

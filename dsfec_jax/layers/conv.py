@@ -48,7 +48,7 @@ class Conv(nn.Module):
         w = self.param("kernel", kernel_init, (k, k, cin, self.features))
         fast = check_kernels(self.kernels) == "fast"
         if k == 1 and fast:
-            # a 1x1 conv is a matmul: XLA's CPU dot is ~2x its conv, forward and weight gradient
+            # a 1x1 conv is a matmul: XLA's CPU dot beats its conv, forward and weight gradient
             y = pointwise_conv(x_BxHxWxC[:, :: self.stride, :: self.stride], w[0, 0])
         elif fast and self.stride == 1 and min(cin, self.features) >= FAST_CONV_MIN_CHANNELS:
             y = fast_conv(x_BxHxWxC, w)
@@ -78,14 +78,13 @@ def fast_conv(x_BxHxWxC, w_KxKxIxO, pads=None):
     """`plain_conv` (the same forward, bit for bit) with a hand-written backward of the same value.
 
     XLA's CPU backend computes a conv's kernel gradient as a convolution whose window is the whole
-    image (3x3 outputs, 96x96 taps): single-threaded and ~4x the forward's time, the largest op of
-    a DSFEC head's backward pass. Here it is, for 3x3 kernels from `WINOGRAD_MIN_CHANNELS` on,
-    Winograd's F(3x3, 4x4) (winograd.py: 36 batched products; 2-2.4x faster than the tap products
-    below on a 96->96 head conv of DSFEC-L), and otherwise K*K matrix products per image, g^T
-    (O x HW) times the image's tap view (HW x I), summed over images: 2.6x faster than XLA's at 1
-    thread and 2.8x at 2 on a 24-channel head conv of a DSFEC-S training batch. The input
-    gradient is Winograd's F(4x4, 3x3) on large wide images, otherwise XLA's (a plain conv of the
-    output gradient).
+    image (3x3 outputs, 96x96 taps): single-threaded and several times the forward's time, the
+    largest op of a DSFEC head's backward pass. Here it is, for 3x3 kernels from
+    `WINOGRAD_MIN_CHANNELS` on, Winograd's F(3x3, 4x4) (winograd.py: 36 batched products), and
+    otherwise K*K matrix products per image, g^T (O x HW) times the image's tap view (HW x I),
+    summed over images. The input gradient is Winograd's F(4x4, 3x3) on large wide images,
+    otherwise XLA's (a plain conv of the output gradient). The timings of each form are in
+    docs/profiler.md; `python -m dsfec_jax.profile.conv_backward` re-measures them.
     """
     return plain_conv(x_BxHxWxC, w_KxKxIxO, pads)
 
@@ -110,12 +109,11 @@ def _fast_conv_bwd(pads, residuals, g_BxHxWxO):
     return dx, conv_kernel_grad(x, g_BxHxWxO, k, pads)
 
 
-# Where Winograd's F(4x4, 3x3) beats the other 3x3 backward forms: `python -m
-# dsfec_jax.profile.conv_backward` (batch 8, 2 threads, each part alone). Kernel gradient: 1.0-2.8x
-# from 32 channels on both sides at 12x12 to 96x96; at 24 channels and 96x96 (DSFEC-S's heads)
-# 0.9-1.03x, so those keep the tap products. Input gradient: 1.1-1.9x from 48x48 and 32 channels
-# on, 0.3-0.8x below (the tile transforms outweigh the product). In the whole step (README),
-# DSFEC-L's fwd + bwd went from 681 to 632 ms and RadarNeXt-FPN's from 390 to 345 ms.
+# Where Winograd's F(4x4, 3x3) beats the other 3x3 backward forms, read from `python -m
+# dsfec_jax.profile.conv_backward` (batch 8, 2 threads, each part alone; the table and the step's
+# gain: docs/profiler.md, "Winograd's algorithm"). Kernel gradient: from 32 channels on both sides
+# (at 24, DSFEC-S's heads, it does not pay, so those keep the tap products). Input gradient: from
+# 48x48 and 32 channels on (below, the tile transforms outweigh the product).
 WINOGRAD_MIN_CHANNELS = 32
 WINOGRAD_INPUT_GRAD_MIN_PIXELS = 48 * 48
 
@@ -128,8 +126,8 @@ def explicit_pads(x_shape, k: int, pads=None) -> tuple[tuple[int, int], tuple[in
 
 
 # Below this many output pixels per image, one product per tap over the whole batch beats one per
-# image (alone, batch 8: 12x12 5x faster, 24x24 1.2-2x; even at 32x32; at 48x48 per image is 2x
-# faster). DSFEC-L's two small deconvs gain ~14 ms alone; its whole fwd + bwd moved within noise.
+# image (measured alone, batch 8, from 12x12 to 48x48: docs/profiler.md, "small images' kernel
+# gradients"; re-measure with `python -m dsfec_jax.profile.conv_backward`).
 PER_IMAGE_KERNEL_GRAD_MIN_PIXELS = 1024
 
 
@@ -163,10 +161,10 @@ def pointwise_conv(x_BxHxWxI, w_IxO):
     """A 1x1 convolution, `x @ w`, with a hand-written backward of the same value.
 
     Autodiff transposes the forward's dot: for the kernel gradient XLA's CPU layout assignment
-    then writes the output gradient out transposed (O x BHW, an 8.6 ms copy for one 96-channel
-    stage-1 layer of a DSFEC-L batch) and hands Eigen a product whose long contracted dimension
-    it packs slowly (~15 ms). Stated directly as `einsum('...i,...o->io')`, XLA keeps both
-    operands in their row-major layout: DSFEC-L's fwd + bwd goes from ~880-980 ms to ~740 ms.
+    then writes the output gradient out transposed (O x BHW) and hands Eigen a product whose long
+    contracted dimension it packs slowly. Stated directly as `einsum('...i,...o->io')`, XLA keeps
+    both operands in their row-major layout (the gain: docs/profiler.md, "1x1 convs"; re-measure:
+    `dsfec bench --train --compare kernels=plain`).
     """
     return jnp.dot(x_BxHxWxI, w_IxO)
 
@@ -186,8 +184,9 @@ pointwise_conv.defvjp(_pointwise_fwd, _pointwise_bwd)
 class DepthwiseConv(nn.Module):
     """Depthwise KxK convolution with one weight tensor and two kernels.
 
-    `impl="shifted"` sums K*K shifted, strided slices (XLA on CPU runs this ~7x faster than a
-    grouped conv); `impl="grouped"` is `feature_group_count=C`, which exports to ONNX as a
+    `impl="shifted"` sums K*K shifted, strided slices (XLA on CPU runs this several times faster
+    than a grouped conv; `dsfec bench --runtimes jax,onnx` sets it against ONNX Runtime's grouped
+    conv); `impl="grouped"` is `feature_group_count=C`, which exports to ONNX as a
     single `Conv(group=C)`. Both read the same (K, K, 1, C) kernel. With `kernels="fast"` the
     shifted form has a hand-written gradient (`fast_shifted_depthwise`); "plain" is autodiff's.
     """
@@ -319,7 +318,7 @@ class ConvTranspose(nn.Module):
     `kernels="fast"` runs it as one dense conv to stride^2 x features channels and a
     depth-to-space (`subpixel_conv_transpose`): the same numbers, but XLA's CPU backend computes
     the dilated form's weight gradient as a window-sized convolution, the slowest op of a DSFEC
-    training step (about 15 % of DSFEC-S's). `kernels="plain"` is `lax.conv_transpose`. Both
+    training step. `kernels="plain"` is `lax.conv_transpose`. Both
     read the same (K, K, C_in, C_out) kernel.
     """
 
@@ -372,8 +371,8 @@ def subpixel_conv_transpose(x_BxHxWxC, w_KxKxIxO, stride: int, fast_grad: bool =
     """`lax.conv_transpose(x, w, (s, s), "SAME")` as a dense conv of the undilated input with a
     kernel that holds every output phase's taps (zeros where a phase has none), then
     depth-to-space (the sub-pixel convolution of Shi et al., CVPR 2016). `fast_grad`: that dense
-    conv's kernel gradient is `conv_kernel_grad`'s per-tap products, not XLA's whole-image
-    window (9 ms of DSFEC-S's 276 ms fwd + bwd for its one 32-channel deconv)."""
+    conv's kernel gradient is `conv_kernel_grad`'s per-tap products, not XLA's single-threaded
+    whole-image window (docs/profiler.md, "The sub-pixel deconv's")."""
     k, _, cin, cout = w_KxKxIxO.shape
     b, h, wd, _ = x_BxHxWxC.shape
     taps, lo, hi = _phase_taps(k, stride)
@@ -392,8 +391,8 @@ def subpixel_conv_transpose(x_BxHxWxC, w_KxKxIxO, stride: int, fast_grad: bool =
 class PointLinear(nn.Module):
     """A 1x1 conv over points (PointPillars' per-point linear layer): (..., D) -> (..., F).
     `kernels="fast"` trains it as `pointwise_conv`: autodiff's kernel gradient here is an
-    Eigen dot over a transposed operand (8 ms of DSFEC-S's 260 ms fwd + bwd for FEC's 32->128
-    layer); the fast form cuts fwd + bwd by 2 % (DSFEC-S, -L) and 5 % (RadarNeXt-FPN)."""
+    Eigen dot over a transposed operand, outside YNNPACK (the gain: docs/profiler.md, "Per-point
+    linears"; re-measure: `dsfec bench --train --compare kernels=plain`)."""
 
     features: int
     use_bias: bool = True

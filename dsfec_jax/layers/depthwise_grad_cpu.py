@@ -3,8 +3,8 @@ the jitted program as an XLA custom call.
 
 Why: XLA computes d w[i, j] = sum over images and pixels of tap (i, j) times g by writing out each
 tap's shifted view of the input (a slice is a copy) and then reducing it, 9 activation-sized
-copies per two images. The loop here reads the input and g once, in place: measured alone on
-DSFEC-L's stage-1 shape (8 x 96 x 96 x 96; the loop on one thread) 6.5 ms against 40.8 ms for XLA's form.
+copies per two images. The loop here reads the input and g once, in place (the timings against
+XLA's form are in docs/profiler.md; `dsfec bench --train --compare kernels=plain` re-measures the step).
 
 How it is called: jaxlib's CPU runtime takes only the typed FFI (`jax.ffi`), whose handler gets an
 `XLA_FFI_CallFrame*` (jaxlib/include/xla/ffi/api/c_api.h, API 0.3). The handler below is a numba

@@ -7,9 +7,9 @@ channels each of the 36 transformed positions becomes one matrix product, so a c
 
 The kernel gradient uses the same algorithm's dual, F(3x3, 4x4) (the roles of the filter and the
 output swapped: the 3x3 "output" is the kernel gradient, the 4x4 "filter" a tile of the output
-gradient). The per-tap products of conv.py ran a 3x3 kernel gradient at ~1.45x the forward; this
-form runs at 0.6-0.75x (DSFEC-L's 96->96 head convs, batch 8 at 48x48, 2 threads: 5.5-6.8 ms
-against 13.3 ms, the forward 9.1 ms).
+gradient). It is used where it beats conv.py's per-tap products, which ran a wide 3x3 kernel
+gradient slower than the forward (the timings: docs/profiler.md, "Winograd's algorithm";
+re-measure: `python -m dsfec_jax.profile.conv_backward --threads 2`).
 
 float32 error: ~1e-5 of the largest element (the transforms' coefficients reach 8 and 1/24), well
 inside the 1e-4 the gradient-equality tests hold the fast kernels to.

@@ -3,7 +3,8 @@
 Durability: WAL journal with synchronous=FULL (the default), so a batch is on disk (WAL fsynced)
 before the service answers 201; the device deletes its queued copy on that answer, so an
 acknowledged batch survives a kill and a power loss. The fsync per commit bounds the write rate
-(one commit at a time: ~270 batches/s on a disk with a 3.7 ms fsync). synchronous=NORMAL skips it:
+(one commit at a time; the rate: docs/edge-and-map-service.md, re-measured by `python -m
+dsfec_jax.edge.loadtest`). synchronous=NORMAL skips it:
 still safe against a killed server process (the WAL is in the OS's page cache), but a power loss
 or kernel crash may lose the last acknowledged batches. WAL lets readers (the map's GETs) run
 beside the writer.

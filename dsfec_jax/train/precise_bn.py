@@ -4,9 +4,8 @@ update_bn_stats, detectron2's PreciseBN hook), before a validation and the check
 Why: the running statistics follow the batches with momentum 0.99 (layers/conv.BN_MOMENTUM, also
 darknet's rolling .99), so after s steps the initial (0, 1) statistics still weigh 0.99^s and the
 early, very different weights' statistics most of the rest: 13 % after the camera quick profile's
-200 steps. Measured: a Shuffle-YOLOv3 overfit on 4 street frames (training loss 110 -> 2.2) scores
-0.0 VOC07 mAP@0.5 on those frames with its running statistics and 100.0 with re-estimated ones.
-Over a 50k-step schedule the two agree; re-estimating costs a few forward passes.
+200 steps, enough to ruin a short run's score (docs/camera.md, "Precise BN", has the measured
+case). Over a 50k-step schedule the two agree; re-estimating costs a few forward passes.
 
 The statistics of each batch are read from one train-mode forward with zeroed running statistics
 (models/bn_statistics.py: exact, no cancellation) and averaged over the batches, as

@@ -11,9 +11,9 @@ built by train/sgd_recipe.py: SGD lr0 0.01, Nesterov momentum 0.937, weight deca
 warm-up epochs (at least `warmup_steps` = 100 batches), linear per-epoch decay to lrf 0.01, gradients
 summed to a nominal batch of 64 and clipped to norm 10. `yolo_paper` is the YOLOv8-Adapter paper's
 profile (300 epochs, batch 64); `yolo_quick` is ultralytics' default batch 16 (4 batches per optimizer
-step) for 15 epochs over ~1000 synthetic 256x64 samples: 15 x 62 batches x 16 = 14,880 frames, 12.4
-minutes at 20 frames/s (9.9 at 25, 16.5 at 15) on the 2-core CPU. Measured there (shared, load ~3),
-after compiling: YOLOv8n-Adapter ~22 frames/s (~11 min), YOLOv8n ~44 frames/s (~6 min).
+step) for 15 epochs over ~1000 synthetic 256x64 samples (15 x 62 batches x 16 = 14,880 frames): minutes
+on the 2-core CPU (the rates it was sized by: docs/range-doppler.md; `dsfec bench --train --models
+yolov8n,yolov8n_adapter` re-measures them).
 
 `yolo3_paper` (optimizer "darknet") is pjreddie/darknet cfg/yolov3-voc.cfg, the schedule the
 Shuffle-YOLOv3 paper trained with on one GPU: batch 64 (darknet's subdivisions=16 only split it
@@ -26,10 +26,8 @@ fractions of the run, so --steps stretches them), weight decay 5e-4 on the conv 
 clipping. `yolo3_quick` is sized for the 2-core CPU: AdamW 1e-3, decoupled decay 5e-4 (SGD at
 0.001 barely moves a from-scratch network in a few hundred steps), 30 warm-up steps, batch 8,
 200 steps, x0.1 at 2/3 and 8/9; train/fit_camera pairs it with multi-scale 320-416 (darknet's is
-320-608). Shuffle-YOLOv3 on one core of this CPU: 1.6 s a step at 320 x 192 with the core to itself,
-~50 s to compile each of the 4 sizes (36 s more for init): about 12 minutes; measured with a second
-process on the same core, 22.4 minutes wall (10.8 CPU-minutes) for the 200 steps, 500 frames made and
-100 validated.
+320-608). It takes minutes on one core (the timings: docs/camera.md, "Schedules"; `dsfec bench --train
+--models shuffle_yolov3` re-measures a step).
 
 The recipe decays per epoch: its epochs come from `epochs`, and steps_per_epoch =
 max(total_steps // epochs, 1), so a `--steps` override stretches or shrinks every epoch rather than

@@ -69,8 +69,8 @@ def kept_channels(full: int, width: int, halved: bool) -> np.ndarray:
 
 def param_shapes(detector) -> dict:
     """The parameter shapes of a network (no compile). Cached per (class, config, x64 mode): a mask
-    table traces the same few dozen configs for every supernet a run builds (~10 s of tracing
-    each time for the YOLO space). The cached tree is shared: read it, never change it."""
+    table traces the same few dozen configs for every supernet a run builds (seconds of tracing
+    each time for the YOLO space: docs/search.md, "SPOS"). The cached tree is shared: read it, never change it."""
     key = _shapes_key(detector)
     if key is None:
         return _traced_shapes(detector)

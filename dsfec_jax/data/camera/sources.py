@@ -2,7 +2,8 @@
 commands read, and how one source's class names meet another's.
 
 - `street` (the default): the embedded street benchmark (data/camera/street; synthetic), rendered
-  at its default 416 x 234 without the right camera (a detector does not read it: ~2x faster),
+  at its default 416 x 234 without the right camera (a detector does not read it, and it costs
+  about as much to render as the left one: docs/camera.md, "Rate"),
   materialised in memory (a training run visits each frame many times). Splits train / val / test.
 - `street:DIR`: the same frames through the PNG/NPZ cache (street/cache.py), one sub-folder per
   (split, seed, count) under DIR, built on first use and reused afterwards (then read lazily).

@@ -3,8 +3,9 @@
 `synthetic` (or `rd-synthetic`: the embedded FMCW benchmark, generated; splits train/val/test),
 `raddet:PATH` (a RADDet root holding train/ and test/ split folders, or one split folder) and
 `carrada:PATH` (a CARRADA root with its sequence split file). Samples are materialised once:
-a training run visits each many times, and re-simulating a map per visit would cost the host
-~7 ms each (the simulator's rate, one core) for nothing.
+a training run visits each many times, and re-simulating a map per visit would cost the host the
+simulator's time again for nothing (its rate: docs/range-doppler.md; `python -m dsfec_jax.data
+inspect --source rd-synthetic` prints it).
 """
 
 from __future__ import annotations

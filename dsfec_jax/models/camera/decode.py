@@ -19,8 +19,8 @@ removes the later ones of its class that overlap it; boxes/nms2d.py keeps the sa
 stable ties), one anchor may give several classes; then the max_detections (300) best. darknet
 keeps every survivor and has no pre-NMS cap; here only the pre_top_k (30,000, ultralytics'
 max_nms) best candidates enter NMS. Both caps matter only for untrained networks, whose scores
-all pass 0.005 (212,940 candidates at 416 with 20 classes: ~1 s per image on this CPU with the
-cap, ~5 s without); a trained one leaves a few thousand.
+all pass 0.005 (212,940 candidates at 416 with 20 classes; the time per image with and without
+the cap: docs/camera.md); a trained one leaves a few thousand.
 
 Back to the image: boxes are in network-input pixels; `rescale` maps them to the original image
 as input = original x scale + offset, per image. Plain resize (what the camera pipeline feeds):

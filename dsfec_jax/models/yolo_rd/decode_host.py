@@ -5,8 +5,9 @@ decode_v10.top_detections), padded to max_detections like the compiled versions.
 
 Why the host: after the confidence cut (0.001) a trained model leaves few candidates, and the host
 NMS visits only those, while the fixed-shape compiled NMS visits all of them (2016 at 256 x 64 with
-six classes): trained YOLOv8n, 1 thread, 50 maps: 0.86 ms host against 3.02 ms compiled; in ONNX
-Runtime the compiled loop costs ~50 ms (deploy/export_rd.py).
+six classes), and in ONNX Runtime the compiled loop is slower still (modalities/rd/export.py; the
+timings: docs/range-doppler.md, "Deploy"; `dsfec bench --models yolov8n --runtimes jax,onnx --threads 1`
+prints both NMS stages).
 """
 
 from __future__ import annotations

@@ -55,7 +55,7 @@ class StreetConfig:
     camera_height_m: float = 1.4           # optical centre above the road
     pitch_deg: float = 0.0                 # positive: the optical axis tilts down
     baseline_m: float = 0.54               # right camera this far to the right (KITTI's rig)
-    render_right: bool = True              # the right image (off: ~2x faster, for detector-only use)
+    render_right: bool = True              # the right image (off: faster, for detector-only use; docs/camera.md)
     near_m: float = 0.1                    # nothing closer than this along the optical axis is drawn
     draw_distance_m: float = 220.0         # static clutter and objects farther away are not drawn
     # time and GPS

@@ -29,7 +29,8 @@ def generate_frame(cfg: SyntheticConfig, split: str, index: int, seed: int = 0) 
 
 
 # Frames kept once generated: training reads every frame once an epoch, and simulating one costs
-# ~2 ms of the host's time, which on a 2-core machine the train step pays for; a frame is ~20-60 KB.
+# the host time that on a 2-core machine the train step pays for (the rate and a frame's size:
+# docs/points-data.md; `python -m dsfec_jax.data inspect --source synthetic` prints the rate).
 KEPT_FRAMES = 4096
 
 

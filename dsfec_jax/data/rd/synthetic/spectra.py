@@ -151,8 +151,8 @@ def complex_gaussian(rng: np.random.Generator, shape: tuple[int, ...], scale: fl
     -scale^2 ln u is exponential and arg z = 2 pi v uniform, independent, which is exactly the
     circular complex Gaussian law; u = (hi + 1/2) / 2^32 and v = lo / 2^32 come from the two
     32-bit halves of one 64-bit draw of the generator. The draw's resolution cuts |z|^2 at
-    22 scale^2 (probability 2e-10 per value). About 2.5x faster than standard_normal here:
-    drawing the noise is the largest single cost of a sample."""
+    22 scale^2 (probability 2e-10 per value). Faster than standard_normal here (docs/range-doppler.md
+    has the timing and the command): drawing the noise is the largest single cost of a sample."""
     n = math.prod(shape)
     real = np.float32 if np.dtype(dtype) == np.complex64 else np.float64
     raw = rng.bit_generator.random_raw(n)
