@@ -39,10 +39,10 @@ from dsfec_jax.core.provenance import versions
 from dsfec_jax.data.camera.batches import MultiScale
 from dsfec_jax.data.camera.images import CameraImage
 from dsfec_jax.data.camera.sources import class_map, load_camera_images, source_classes
-from dsfec_jax.evaluate_camera import evaluate_camera
+from dsfec_jax.modalities.image.evaluate import evaluate_camera
 from dsfec_jax.models.camera.family import FAMILY as CAMERA
-from dsfec_jax.predict_camera import CameraPredictor
-from dsfec_jax.train.fit_camera import bn_recalibration, fit_camera
+from dsfec_jax.modalities.image.predict import CameraPredictor
+from dsfec_jax.modalities.image.fit import bn_recalibration, fit_camera
 from dsfec_jax.train.schedules import get_schedule
 
 from experiments.common import fmt

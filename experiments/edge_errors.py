@@ -93,7 +93,7 @@ def measure(args) -> dict:
     from dsfec_jax.geo.gps import EgoTrack, GpsFixes, clean_fixes
     from dsfec_jax.geo.placement import REFERENCE_POINTS, Placer
     from dsfec_jax.metrics.localisation import match_frame
-    from dsfec_jax.predict_depth import load_depth_predictor
+    from dsfec_jax.modalities.image.depth import load_depth_predictor
 
     cfg = StreetConfig()
     drive = generate_drive(cfg, "test", args.drive, args.seed, args.frames)
