@@ -22,6 +22,7 @@ the network's first format (before it joined the zoo), which its record reads.
 
 from __future__ import annotations
 
+import functools
 import os
 
 import jax
@@ -68,13 +69,20 @@ def disparity_function(cfg: MonodepthConfig, post_process: bool = True):
     return disparity
 
 
+@functools.lru_cache(maxsize=8)
+def jitted_disparity(cfg: MonodepthConfig, post_process: bool = True):
+    """disparity_function, jitted once per (config, post_process): the predictors of one process
+    (a run's weights, then the shipped file measured) share its compilation."""
+    return jax.jit(disparity_function(cfg, post_process))
+
+
 class MonodepthPredictor:
     """image (H, W, 3) uint8 -> disparity (H, W) float32 as a fraction of the width (module docstring)."""
 
     def __init__(self, config: MonodepthConfig, variables: dict, post_process: bool = True):
         self.config, self.post_process = config, post_process
         self.variables = {"params": variables["params"]}
-        self._disparity = jax.jit(disparity_function(config, post_process))
+        self._disparity = jitted_disparity(config, post_process)
 
     def network_input(self, image: np.ndarray) -> np.ndarray:
         """(1, h, w, 3) float32 in [0, 1] at the network's input size."""
