@@ -6,6 +6,8 @@
     dsfec serve --db runs/map.sqlite [--host 127.0.0.1 --port 8000]          # + `dsfec serve token add ...`
     dsfec depth train --run-dir runs/depth/monodepth_street --steps 1500 --frames 2000
     dsfec depth eval  [--weights PATH] --frames 50
+    dsfec depth ship  --run-dir RUN [--out PATH]      # weights + manifest: training record, measured figures
+    dsfec depth convert --weights OLD [--out PATH]    # a file of the depth weights' first format -> the zoo's
 
 `dsfec edge` runs detector -> depth -> placement on every frame (edge.pipeline), appends each frame's
 batch to OUT/batches.jsonl (a killed run resumes), posts it to --server through a disk queue
@@ -33,7 +35,7 @@ from .service.options import add_arguments as add_service_arguments
 
 EDGE_COMMANDS = ("edge", "serve", "depth")
 TOKEN_ENV = "DSFEC_MAP_TOKEN"
-DEPTH_WEIGHTS = Path(__file__).resolve().parent / "weights" / "depth" / "monodepth_street.msgpack"
+DEPTH_MODEL = "monodepth_street"  # the zoo's auxiliary variant whose shipped weights `--depth network` runs
 
 
 def add_commands(sub) -> None:
@@ -53,7 +55,7 @@ def add_commands(sub) -> None:
     e.add_argument("--weights", default=None, help="detector weights (default: shipped)")
     e.add_argument("--score-threshold", type=float, default=0.3, help="detections kept for placement")
     e.add_argument("--depth", default="network", help="network | truth | stereo:DIR | depth:DIR")
-    e.add_argument("--depth-weights", default=None, help=f"monodepth weights (default {DEPTH_WEIGHTS.name}, shipped)")
+    e.add_argument("--depth-weights", default=None, help=f"monodepth weights (default the shipped {DEPTH_MODEL})")
     e.add_argument("--a", type=float, default=None, help="adjustment coefficient a in depth = b f / (a d)")
     e.add_argument("--baseline", type=float, default=None, help="stereo baseline b in metres (default: camera.json / 0.54)")
     e.add_argument("--reference", default="center", choices=("center", "bottom_center"))
@@ -64,16 +66,17 @@ def add_commands(sub) -> None:
     e.add_argument("--seed", type=int, default=0)
     s = sub.add_parser("serve", help="the map service: POST /detections, GET /objects, GET / (map page); token admin")
     add_service_arguments(s)
-    d = sub.add_parser("depth", help="train or evaluate the monodepth network on the street benchmark")
-    d.add_argument("action", choices=("train", "eval", "ship"))
+    d = sub.add_parser("depth", help="train, evaluate or ship the monodepth network on the street benchmark")
+    d.add_argument("action", choices=("train", "eval", "ship", "convert"))
     d.add_argument("--run-dir", default=None, help="train: the run directory (resumed if it exists); ship: the finished run")
-    d.add_argument("--out", default=None, help=f"ship: where the weights go (default the shipped {DEPTH_WEIGHTS.name})")
+    d.add_argument("--out", default=None, help=f"ship, convert: where the weights go (default the shipped {DEPTH_MODEL}'s)")
     d.add_argument("--steps", type=positive_int, default=1500)
-    d.add_argument("--frames", type=positive_int, default=None, help="train: rendered stereo pairs (2000); eval: test frames (50)")
+    d.add_argument("--frames", type=positive_int, default=None, help="train: rendered stereo pairs (2000); eval, ship, convert: test frames measured (50)")
     d.add_argument("--batch-size", type=positive_int, default=8)
     d.add_argument("--input", default=None, metavar="HxW", help="train: network input size (default the config's, 128x224)")
     d.add_argument("--seed", type=int, default=0)
-    d.add_argument("--weights", default=None, help=f"eval: weights (default {DEPTH_WEIGHTS.name}, shipped)")
+    d.add_argument("--weights", default=None,
+                   help=f"eval: weights (default the shipped {DEPTH_MODEL}); convert: the file to convert")
     d.add_argument("--init", default=None, metavar="PATH",
                    help="train: start from these weights or checkpoint (same --input): continue or fine-tune")
     d.add_argument("--json", action="store_true")
@@ -96,15 +99,16 @@ def main(args) -> int:
 def run_depth(args) -> int:
     import json
 
+    from . import zoo
+
     if args.action == "train":
-        from .models.depth import MonodepthConfig
         from .modalities.image.fit_depth import fit_depth
 
         if not args.run_dir:
             sys.exit("dsfec depth train: --run-dir is required")
         try:
             size = dict(zip(("height", "width"), map(int, args.input.lower().split("x")))) if args.input else {}
-            config = MonodepthConfig(**size)
+            config = zoo.config(DEPTH_MODEL, **size)
         except ValueError as err:
             sys.exit(f"dsfec depth train: --input {args.input!r}: {err} (expected HxW, multiples of 32)")
         try:
@@ -114,24 +118,38 @@ def run_depth(args) -> int:
             sys.exit(f"dsfec depth train: {err}")
         print(json.dumps({k: v for k, v in info.items() if k != "losses"}, indent=1))
         return 0
-    if args.action == "ship":
-        from .modalities.image.depth import ship_depth_weights
-
-        if not args.run_dir:
-            sys.exit("dsfec depth ship: --run-dir is required")
-        try:
-            manifest = ship_depth_weights(args.run_dir, args.out or DEPTH_WEIGHTS, command_line(args))
-        except (OSError, ValueError) as err:
-            sys.exit(f"dsfec depth ship: {err}")
-        print(json.dumps({k: manifest[k] for k in ("step", "train_command", "sha256")}, indent=1))
-        return 0
+    if args.action in ("ship", "convert"):
+        return ship_depth(args)
     from .data.camera.street import StreetConfig, StreetDataset
     from .modalities.image.depth import load_depth_predictor
     from .modalities.image.fit_depth import evaluate_dense
 
-    predictor = load_depth_predictor(args.weights or DEPTH_WEIGHTS)
+    predictor = load_depth_predictor(args.weights or zoo.shipped_weights(DEPTH_MODEL))
     scores = evaluate_dense(predictor, StreetDataset(StreetConfig(), "test", args.seed, args.frames or 50))
     print(json.dumps(scores, indent=1) if args.json else "  ".join(f"{k} {v:.4f}" for k, v in scores.items()))
+    return 0
+
+
+def ship_depth(args) -> int:
+    """`dsfec depth ship` (a finished run) or `dsfec depth convert` (a first-format file): the
+    weights with the detectors' manifest rules (modalities/image/ship_depth.py)."""
+    import json
+
+    from . import zoo
+    from .modalities.image import ship_depth as sd
+
+    source = args.run_dir if args.action == "ship" else args.weights
+    if not source:
+        sys.exit(f"dsfec depth {args.action}: --{'run-dir' if args.action == 'ship' else 'weights'} is required")
+    ship = sd.ship_depth_weights if args.action == "ship" else sd.convert_depth_weights
+    try:
+        manifest = ship(source, args.out or zoo.shipped_weights(DEPTH_MODEL), command_line(args),
+                        args.frames or sd.MEASURED_FRAMES)
+    except (OSError, ValueError) as err:
+        sys.exit(f"dsfec depth {args.action}: {err}")
+    shown = {"step": manifest["step"], "train_command": manifest["training"].get("command"),
+             "measured": manifest["measured"], "sha256": manifest["sha256"]}
+    print(json.dumps(shown, indent=1))
     return 0
 
 
@@ -140,9 +158,11 @@ def depth_source(args, baseline_m: float):
 
     kind, _, where = args.depth.partition(":")
     if kind == "network":
+        from . import zoo
         from .modalities.image.depth import load_depth_predictor
 
-        return ds.NetworkDepth(load_depth_predictor(args.depth_weights or DEPTH_WEIGHTS), baseline_m, args.a)
+        weights = args.depth_weights or zoo.shipped_weights(DEPTH_MODEL)
+        return ds.NetworkDepth(load_depth_predictor(weights), baseline_m, args.a)
     if kind == "truth":
         return ds.TruthDepth()
     if kind in ("stereo", "depth") and where:

@@ -6,6 +6,10 @@
     >>> det = zoo.create("dsfec_s", stem_filters=16)
     >>> variables = det.init(jax.random.key(0))
     >>> heads = det.apply(variables, det.dummy_inputs(1))
+    >>> zoo.available_auxiliary()                    # registered networks that are not detectors
+    ['monodepth_street', 'monodepth_tiny']
+    >>> depth = zoo.create_auxiliary("monodepth_street")
+    >>> variables = zoo.model_variables(depth, zoo.shipped_weights("monodepth_street"))
 
 It sits above `models/` (not inside it) because later it also assembles predictors from
 weights, pillarization and box decoding, which models must not import.
@@ -20,7 +24,9 @@ from typing import Any
 
 import jax
 
+from .models.auxiliary import Auxiliary
 from .models.camera.family import FAMILY as CAMERA
+from .models.depth.auxiliary import AUXILIARY as DEPTH
 from .models.dsfec.family import FAMILY as DSFEC
 from .models.family import MODALITIES, Family
 from .models.radarnext.family import FAMILY as RADARNEXT
@@ -29,6 +35,9 @@ from .models.yolo_rd.family import FAMILY as YOLO_RD
 # The registry of families: a new family is its folder under models/ plus one entry here.
 FAMILIES: dict[str, Family] = {f.name: f for f in (DSFEC, RADARNEXT, YOLO_RD, CAMERA)}
 REGISTRY: dict[str, Any] = {name: cfg for f in FAMILIES.values() for name, cfg in f.variants.items()}
+# Networks that are not detectors (models/auxiliary.py): named, built and loaded as the detectors are
+AUXILIARIES: dict[str, Auxiliary] = {a.name: a for a in (DEPTH,)}
+AUXILIARY_REGISTRY: dict[str, Any] = {name: cfg for a in AUXILIARIES.values() for name, cfg in a.variants.items()}
 
 
 def available(family: str | None = None, modality: str | None = None) -> list[str]:
@@ -63,10 +72,10 @@ def require_modality(cfg_or_name, modality: str, what: str) -> Family:
 
 
 def config(name: str, /, **overrides):
-    """The frozen config of `name` with `overrides` applied (validated)."""
-    if name not in REGISTRY:
-        raise KeyError(f"unknown model {name!r}; available: {available()}")
-    base = REGISTRY[name]
+    """The frozen config of `name` (a detector's or an auxiliary model's) with `overrides` applied (validated)."""
+    base = REGISTRY.get(name) or AUXILIARY_REGISTRY.get(name)
+    if base is None:
+        raise KeyError(f"unknown model {name!r}; available: {available()}; auxiliary: {available_auxiliary()}")
     fields = {f.name for f in dataclasses.fields(base)}
     unknown = sorted(set(overrides) - fields)
     if unknown:
@@ -77,6 +86,8 @@ def config(name: str, /, **overrides):
 
 class Detector:
     """A config plus its network, with pure functions of (variables, inputs)."""
+
+    collections = ("params", "batch_stats")  # what its weights files hold
 
     def __init__(self, cfg):
         self.config = cfg
@@ -93,6 +104,10 @@ class Detector:
     def init(self, rng: jax.Array) -> dict:
         """Fresh variables: {'params': ..., 'batch_stats': ...}."""
         return jax.jit(lambda r, x: self.module.init(r, **x, train=False))(rng, self.dummy_inputs(1))
+
+    def variable_shapes(self) -> dict:
+        """init's tree as shapes and dtypes, computed without running it."""
+        return jax.eval_shape(self.init, jax.random.key(0))
 
     def apply(self, variables: dict, inputs: dict, train: bool = False):
         """Head outputs. With train=True, batch statistics are used and updated, and the
@@ -130,34 +145,141 @@ def input_columns(name: str) -> str:
 
 def create(name: str, /, **overrides) -> Detector:
     """A detector of the registered variant `name`, any config field overridden."""
+    if name in AUXILIARY_REGISTRY:
+        raise KeyError(f"{name!r} is an auxiliary model ({auxiliary_of(name).task}), not a detector: "
+                       "zoo.create_auxiliary builds it")
     return Detector(config(name, **overrides))
+
+
+def available_auxiliary(kind: str | None = None) -> list[str]:
+    """Names of the registered auxiliary models' variants, optionally of one record (a key of AUXILIARIES)."""
+    if kind is not None and kind not in AUXILIARIES:
+        raise KeyError(f"unknown auxiliary model {kind!r}; auxiliary models: {sorted(AUXILIARIES)}")
+    return sorted(AUXILIARY_REGISTRY if kind is None else AUXILIARIES[kind].variants)
+
+
+def auxiliary_of(cfg_or_name) -> Auxiliary:
+    """The Auxiliary record of a config (or of a registered auxiliary variant's name)."""
+    cfg = config(cfg_or_name) if isinstance(cfg_or_name, str) else cfg_or_name
+    for record in AUXILIARIES.values():
+        if type(cfg) is record.config_class:
+            return record
+    raise TypeError(f"{type(cfg).__name__} belongs to no registered auxiliary model; "
+                    f"auxiliary models: {sorted(AUXILIARIES)}")
+
+
+class AuxiliaryNet:
+    """An auxiliary model's config plus its network: what the zoo's loader needs of a Detector."""
+
+    def __init__(self, cfg):
+        self.config = cfg
+        self.record = auxiliary_of(cfg)
+        self.module = self.record.build(cfg)
+        self.collections = self.record.collections
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    def dummy_inputs(self, batch_size: int = 1) -> tuple:
+        return self.record.dummy_inputs(self.config, batch_size)
+
+    def init(self, rng: jax.Array) -> dict:
+        """Fresh variables (the record's initialiser)."""
+        return self.record.init(self.config, rng)
+
+    def variable_shapes(self) -> dict:
+        return jax.eval_shape(self.module.init, jax.random.key(0), *self.dummy_inputs(1))
+
+    def apply(self, variables: dict, *inputs):
+        return self.module.apply(variables, *inputs)
+
+
+def create_auxiliary(name: str, /, **overrides) -> AuxiliaryNet:
+    """The auxiliary model of the registered variant `name`, any config field overridden."""
+    if name not in AUXILIARY_REGISTRY:
+        raise KeyError(f"unknown auxiliary model {name!r}; auxiliary: {available_auxiliary()}")
+    return AuxiliaryNet(config(name, **overrides))
 
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
 
 
 def shipped_weights(name: str) -> Path:
+    """The weights shipped for variant `name`: WEIGHTS_DIR/NAME.msgpack for a detector, in its
+    record's folder for an auxiliary model (weights/depth/monodepth_street.msgpack)."""
+    if name in AUXILIARY_REGISTRY:
+        return WEIGHTS_DIR / auxiliary_of(name).name / f"{name}.msgpack"
     return WEIGHTS_DIR / f"{name}.msgpack"
 
 
-def load_variables(detector: Detector, path: str | Path) -> dict:
-    """{'params', 'batch_stats'} from a weights file or a training checkpoint, shape-checked."""
+def load_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:
+    """The model's collections ({'params', 'batch_stats'} for a detector, {'params'} for the depth
+    network) from a weights file or a training checkpoint, shape-checked; a checkpoint's other
+    entries (optimizer state, step) come back as stored."""
     from .core import checkpoint
 
     raw = checkpoint.load(path)
-    missing = [k for k in ("params", "batch_stats") if k not in raw]
+    missing = [k for k in model.collections if k not in raw]
     if missing:
         raise ValueError(f"{path}: expected a variables tree with {missing}; found keys {sorted(raw)}")
-    target = jax.eval_shape(detector.init, jax.random.key(0))
-    return checkpoint.load(path, {"params": target["params"], "batch_stats": target["batch_stats"],
-                                  **{k: v for k, v in raw.items() if k not in ("params", "batch_stats")}})
+    target = model.variable_shapes()
+    return checkpoint.load(path, {**{k: target[k] for k in model.collections},
+                                  **{k: v for k, v in raw.items() if k not in model.collections}})
 
 
-def model_variables(detector: Detector, path: str | Path) -> dict:
-    """{'params', 'batch_stats'} of a weights file or checkpoint (load_variables without the
+def model_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:
+    """The model's collections of a weights file or checkpoint (load_variables without the
     optimizer state and step a training checkpoint also holds): what a predictor or export runs."""
-    variables = load_variables(detector, path)
-    return {"params": variables["params"], "batch_stats": variables["batch_stats"]}
+    variables = load_variables(model, path)
+    return {k: variables[k] for k in model.collections}
+
+
+def training_record(path: str | Path) -> dict:
+    """How a weights file or checkpoint was trained: its manifest's "training" (`dsfec ship`, `dsfec
+    depth ship`, a finished depth run's weights), else what an auxiliary model's record reads from a
+    manifest of its first format, else the run.json of the run directory a checkpoint sits in
+    (RUN/checkpoints/*.msgpack); {} when none is readable."""
+    from .core.checkpoint import manifest_path
+
+    path = Path(path)
+    for record in (manifest_path(path), path.parent.parent / "run.json"):
+        try:
+            info = json.loads(record.read_text())
+        except (OSError, ValueError):
+            continue
+        if not isinstance(info, dict):
+            continue
+        if record.name == "run.json":
+            return info
+        if isinstance(info.get("training"), dict):
+            return info["training"]
+        for aux in AUXILIARIES.values():
+            first = aux.first_format_training(info) if aux.first_format_training else None
+            if first is not None:
+                return first
+    return {}
+
+
+def auxiliary_config(path: str | Path, kind: str):
+    """The config of auxiliary model `kind` that the weights or checkpoint at PATH were trained
+    with: the whole config of its training record (a run may change any field; the depth network's
+    `--input` changes its input size but no weight's shape, so the name alone would run it wrong)."""
+    if kind not in AUXILIARIES:
+        raise KeyError(f"unknown auxiliary model {kind!r}; auxiliary models: {sorted(AUXILIARIES)}")
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{path}: no such checkpoint/weights file")
+    recorded = training_record(path).get("config")
+    if not isinstance(recorded, dict):
+        from .core.checkpoint import manifest_path
+
+        raise ValueError(f"{manifest_path(path)}: no 'config' in its training record, and no run.json of a "
+                         f"training run beside it; expected weights of a {kind} training run, shipped weights "
+                         "or a training checkpoint")
+    try:
+        return AUXILIARIES[kind].config_from_dict(recorded)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"{path}: its training record's config: {err}") from err
 
 
 def trained_fields(path: str | Path, fields) -> dict:

@@ -49,6 +49,32 @@ def test_the_camera_family_is_a_zoo_family():
         zoo.load("yolov3_darknet53")  # too costly to train on this CPU (README); Shuffle-YOLOv3's are shipped
 
 
+def test_the_depth_network_is_an_auxiliary_model_of_the_zoo():
+    from dsfec_jax.models.depth import TINY, MonodepthConfig, count_params
+
+    assert zoo.available_auxiliary() == zoo.available_auxiliary("depth") == ["monodepth_street", "monodepth_tiny"]
+    assert not set(zoo.available_auxiliary()) & set(zoo.available())  # one namespace: no name is both
+    assert zoo.config("monodepth_street") == MonodepthConfig() and zoo.config("monodepth_tiny", width=96).width == 96
+    assert zoo.auxiliary_of("monodepth_tiny").name == "depth"
+    net = zoo.create_auxiliary("monodepth_tiny")
+    assert net.config == TINY and net.collections == ("params",)
+    shapes = net.variable_shapes()
+    assert set(shapes) == {"params"} and count_params(shapes) == count_params(net.init(jax.random.key(0)))
+    with pytest.raises(KeyError, match="create_auxiliary"):
+        zoo.create("monodepth_street")
+    with pytest.raises(KeyError, match="monodepth_street"):
+        zoo.create_auxiliary("monodepth_xl")
+    # its shipped weights load through the detectors' loader
+    path = zoo.shipped_weights("monodepth_street")
+    assert path == zoo.WEIGHTS_DIR / "depth" / "monodepth_street.msgpack" and path.is_file()
+    street = zoo.create_auxiliary("monodepth_street")
+    assert zoo.auxiliary_config(path, "depth") == street.config
+    variables = zoo.model_variables(street, path)
+    assert set(variables) == {"params"} and count_params(variables) == 2_004_264
+    with pytest.raises(ValueError, match="batch_stats"):  # a detector does not load it
+        zoo.load_variables(zoo.create("dsfec_s"), path)
+
+
 @pytest.mark.parametrize("name", sorted(PINNED_PARAMS))
 def test_pinned_param_counts(name):
     assert n_params(zoo.create(name)) == PINNED_PARAMS[name]

@@ -183,13 +183,31 @@ def test_cli_edge_over_a_folder_with_user_depth(drive, frames, tmp_path, monkeyp
         main(["edge", "--frames", str(d), "--out", str(out)])
 
 
-def test_the_shipped_depth_weights_load_and_record_how_they_were_made():
-    from dsfec_jax.cli_edge import DEPTH_WEIGHTS
-    from dsfec_jax.core import checkpoint
-    from dsfec_jax.modalities.image.depth import load_depth_variables
+# The shipped depth weights' disparity on a fixed image (np.random.default_rng(0), 234 x 416), computed
+# with the depth network's own loader (modalities/image/depth.py at 3487237) before it joined the zoo,
+# under the tests' XLA flags (conftest: backend optimisation level 0; a plain process gives other last
+# bits, sha256 f923ab85...); the zoo's loader must give the same bits
+SHIPPED_DISPARITY_SHA256 = "da68d3fcd53e66745070615684f2b1844c27c5a8d879cf0357f37a1097a01d9e"
+SHIPPED_DISPARITY_AT = {(0, 0): 0.12154500931501389, (117, 208): 0.006413883995264769, (233, 415): 0.12793684005737305}
 
-    manifest = checkpoint.read_manifest(DEPTH_WEIGHTS)
-    assert manifest["train_command"].startswith("dsfec depth train") and manifest["seed"] == 0
-    assert manifest["versions"]["jax"] and checkpoint.problem(DEPTH_WEIGHTS) is None
-    config, variables = load_depth_variables(DEPTH_WEIGHTS)
-    assert config.name == "monodepth_street" and variables["params"]
+
+def test_the_shipped_depth_weights_follow_the_zoo_rules_and_give_the_same_disparity():
+    import hashlib
+
+    from dsfec_jax import zoo
+    from dsfec_jax.cli_edge import DEPTH_MODEL
+    from dsfec_jax.core import checkpoint
+    from dsfec_jax.modalities.image.depth import load_depth_predictor
+
+    path = zoo.shipped_weights(DEPTH_MODEL)
+    manifest = checkpoint.read_manifest(path)
+    assert manifest["model"] == DEPTH_MODEL and manifest["training"]["command"].startswith("dsfec depth train")
+    assert manifest["training"]["seed"] == 0 and manifest["versions"]["jax"] and checkpoint.problem(path) is None
+    assert manifest["training"]["init_chain"][0]["command"].startswith("dsfec depth train")
+    test = manifest["measured"]["test"]  # docs/edge-and-map-service.md quotes them
+    assert (round(test["abs_rel"], 3), round(test["rmse"], 2), round(test["a1"], 3), test["frames"]) == (0.378, 5.01, 0.73, 50)
+    predictor = load_depth_predictor(path)
+    assert predictor.config == zoo.config(DEPTH_MODEL)
+    disparity = predictor(np.random.default_rng(0).integers(0, 256, (234, 416, 3), dtype=np.uint8))
+    assert {at: float(disparity[at]) for at in SHIPPED_DISPARITY_AT} == SHIPPED_DISPARITY_AT
+    assert hashlib.sha256(disparity.tobytes()).hexdigest() == SHIPPED_DISPARITY_SHA256

@@ -1,13 +1,15 @@
 """The monodepth network, its post-processing and the jitted predictor, on tiny shapes."""
 
 import dataclasses
+import json
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dsfec_jax.core import atomic
+from dsfec_jax import zoo
+from dsfec_jax.core import atomic, checkpoint
 from dsfec_jax.models.depth import TINY, MonodepthConfig, MonodepthNet, init_variables, post_process_disparity
 from dsfec_jax.modalities.image.depth import MonodepthPredictor, load_depth_predictor, save_depth_weights
 
@@ -133,7 +135,8 @@ def test_predictor_blends_the_network_maps(variables, forward):
 
 def test_weights_round_trip_and_missing_config(variables, tmp_path):
     path = tmp_path / "w.msgpack"
-    save_depth_weights(path, TINY, variables, {"step": 3})
+    save_depth_weights(path, TINY, variables, {"seed": 0}, step=3)
+    assert zoo.training_record(path) == {"seed": 0, "config": json.loads(json.dumps(TINY.to_dict()))}
     loaded = load_depth_predictor(path)
     assert loaded.config == TINY
     np.testing.assert_array_equal(loaded(_frame_image()), MonodepthPredictor(TINY, variables)(_frame_image()))
@@ -145,3 +148,36 @@ def test_weights_round_trip_and_missing_config(variables, tmp_path):
     save_depth_weights(path, other, variables)
     with pytest.raises(ValueError, match="shape"):
         load_depth_predictor(path)
+
+
+def _first_format(path, config, variables, **provenance):
+    """Weights as the depth network wrote them before it joined the zoo (modalities/image/depth.py at
+    3487237: save_depth_weights): {'params'}, the manifest's "format" and whole "config" at its top level."""
+    checkpoint.save(path, {"params": variables["params"]},
+                    {"format": "dsfec_jax.monodepth", "config": config.to_dict(), "step": 3, **provenance})
+
+
+def test_weights_of_the_first_format_load_and_convert_unchanged(variables, tmp_path):
+    from dsfec_jax.data.camera.street import StreetConfig
+    from dsfec_jax.modalities.image.ship_depth import convert_depth_weights
+
+    old, new = tmp_path / "old.msgpack", tmp_path / "new.msgpack"
+    wide = dataclasses.replace(TINY, width=96)  # the config comes from the file, not from its name
+    _first_format(old, wide, variables, seed=4, train_command="dsfec depth train x", ship_command="dsfec depth ship x",
+                  source="x/monodepth.msgpack", init_chain=[{"path": "w", "step": 1}])
+    image = _frame_image()
+    expected = MonodepthPredictor(wide, variables)(image)
+    loaded = load_depth_predictor(old)
+    assert loaded.config == wide
+    np.testing.assert_array_equal(loaded(image), expected)
+    manifest = convert_depth_weights(old, new, "dsfec depth convert --weights old", frames=1,
+                                     street_config=StreetConfig(width=64))
+    assert manifest["sha256"] == checkpoint.read_manifest(old)["sha256"]  # the same bytes
+    assert (manifest["model"], manifest["step"], manifest["source_checkpoint"]) == ("monodepth_tiny", 3, "x/monodepth.msgpack")
+    assert manifest["ship_command"] == "dsfec depth ship x" and manifest["convert_command"] == "dsfec depth convert --weights old"
+    training = manifest["training"]
+    assert (training["command"], training["seed"], training["init_chain"]) == ("dsfec depth train x", 4, [{"path": "w", "step": 1}])
+    assert manifest["measured"]["test"]["frames"] == 1 and manifest["versions"]["jax"]
+    np.testing.assert_array_equal(load_depth_predictor(new)(image), expected)
+    with pytest.raises(ValueError, match="already in the zoo's layout"):
+        convert_depth_weights(new, tmp_path / "again.msgpack", "")

@@ -10,10 +10,12 @@ import pytest
 
 from dsfec_jax.data.camera.street import StreetConfig
 from dsfec_jax.models.depth import TINY
-from dsfec_jax.modalities.image.depth import load_depth_predictor, ship_depth_weights
+from dsfec_jax.modalities.image.depth import load_depth_predictor
+from dsfec_jax.modalities.image.ship_depth import ship_depth_weights
 from dsfec_jax.modalities.image.fit_depth import DepthAugment, DepthBatchStream, fit_depth, read_losses, render_pairs
 
 STREET = StreetConfig(width=64)  # 64 x 36 frames, area-resized to the tiny net's 64 x 32
+MEASURE = dict(frames=2, street_config=STREET)  # a shipped file's measured figures, on 2 tiny test frames
 SETUP = dict(config=TINY, frames=6, steps=30, batch_size=2, seed=0, street_config=STREET, progress=False,
              learning_rate=1e-3, log_every=1, ckpt_every=10)
 
@@ -72,15 +74,20 @@ def test_training_lowers_the_loss_repeats_and_resumes_exactly(tmp_path):
     with pytest.raises(ValueError, match="same --input"):
         fit_depth(tmp_path / "e", **{**SETUP, "config": dataclasses.replace(TINY, width=96)}, init=info["weights"])
 
-    # dsfec depth ship: the weights with the commands of the run and of the run it continued
+    # dsfec depth ship: the weights with the detectors' manifest rules: the run's record (command, seed,
+    # config, versions) with the commands of the runs it continued, and the measured figures
     fit_depth(tmp_path / "d", **SETUP, init=info["weights"], command="dsfec depth train d")
-    manifest = ship_depth_weights(tmp_path / "d", tmp_path / "shipped.msgpack", "dsfec depth ship d")
-    assert manifest["train_command"] == "dsfec depth train d" and manifest["step"] == 30
-    assert [(r["command"], r["step"]) for r in manifest["init_chain"]] == [("dsfec depth train a", 30)]
+    manifest = ship_depth_weights(tmp_path / "d", tmp_path / "shipped.msgpack", "dsfec depth ship d", **MEASURE)
+    training = manifest["training"]
+    assert manifest["model"] == "monodepth_tiny" and manifest["step"] == 30 and manifest["ship_command"] == "dsfec depth ship d"
+    assert training["command"] == "dsfec depth train d" and training["seed"] == 0 and manifest["versions"]["jax"]
+    assert [(r["command"], r["step"]) for r in training["init_chain"]] == [("dsfec depth train a", 30)]
+    measured = manifest["measured"]["test"]
+    assert measured["frames"] == 2 and measured["images"] == 2 and np.isfinite([measured["abs_rel"], measured["rmse"]]).all()
     assert load_depth_predictor(tmp_path / "shipped.msgpack").config == TINY
     # a run continued from shipped weights (no run directory beside them): their manifest's command
     fit_depth(tmp_path / "f", **SETUP, init=tmp_path / "shipped.msgpack", command="dsfec depth train f")
-    chain = ship_depth_weights(tmp_path / "f", tmp_path / "again.msgpack", "dsfec depth ship f")["init_chain"]
+    chain = ship_depth_weights(tmp_path / "f", tmp_path / "again.msgpack", "dsfec depth ship f", **MEASURE)["training"]["init_chain"]
     assert [(r["command"], r["step"]) for r in chain] == [("dsfec depth train d", 30)]
     assert [r["command"] for r in chain[0]["init_chain"]] == ["dsfec depth train a"]
     with pytest.raises(ValueError, match="finished"):

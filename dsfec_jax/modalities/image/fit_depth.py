@@ -16,12 +16,13 @@ the right camera on the right); with probability 0.5 one gamma U(0.8, 1.2), brig
 and per-channel colour U(0.8, 1.2)^3 shift applied to both images, then clipped to [0, 1].
 
 Optimisation as monodepth_main.py: Adam (b1 0.9, b2 0.999, eps 1e-8), learning rate 1e-4 halved
-at 3/5 and again at 4/5 of the steps, no weight decay, no clipping; the loss is train/depth_loss.py.
+at 3/5 and again at 4/5 of the steps, no weight decay, no clipping; the loss is models/depth/loss.py.
 
 The loop is the project's (train/loop.py): RUN_DIR/run.json, metrics.jsonl (loss, its parts,
 grad_norm, frames/s every `log_every` steps), checkpoints/step_*.msgpack (whole train state, last
 3), resumable at the last checkpoint with identical batches. At the end the weights go to
-RUN_DIR/monodepth.msgpack with the config in the manifest (predict_depth.load_depth_predictor).
+RUN_DIR/monodepth.msgpack in the zoo's layout, run.json as the manifest's training record
+(depth.load_depth_predictor reads it; `dsfec depth ship` adds the measured figures).
 """
 
 from __future__ import annotations
@@ -222,7 +223,8 @@ command line, for run.json (and the shipped weights' manifest: `dsfec depth ship
     weights = None
     if reached >= steps:
         weights = run_dir / WEIGHTS_NAME
-        save_depth_weights(weights, config, variables, {"step": reached, "seed": seed, "train_frames": frames})
+        run = json.loads((run_dir / "run.json").read_text())  # as stored when the run started
+        save_depth_weights(weights, config, variables, {**run, "train_frames": frames}, step=reached)
     return variables, {"run_dir": str(run_dir), "step": reached, "steps": steps,
                        "weights": str(weights) if weights else None, "train_frames": frames,
                        "render_s": round(render_s, 1), "train_s": round(time.perf_counter() - t1, 1),
