@@ -290,6 +290,8 @@ def test_radarnext_exports_fused_with_dcnv3_and_matches_the_branched_jax_network
 def test_the_bench_worker_times_the_chains_its_caller_hands_it():
     """The worker is modality-free: it times whatever chains `chains_of(name)` builds (the entry
     point passes each model's Modality.bench_chains) and records their stages and fields."""
+    import time
+
     from dsfec_jax.deploy.bench import workers
     from dsfec_jax.deploy.bench.__main__ import chains_of
     from dsfec_jax.modalities.registry import modality_of
@@ -298,7 +300,8 @@ def test_the_bench_worker_times_the_chains_its_caller_hands_it():
 
     def chains(name, runtimes, threads, workdir, repeats):
         asked.append((name, tuple(runtimes), threads, repeats))
-        return {rt: ([("make", lambda _: [1.0, 2.0]), ("sum", sum)], {"weights": "none"}) for rt in runtimes}
+        make = lambda _: time.sleep(1e-3) or [1.0, 2.0]  # noqa: E731  (a stage that takes time)
+        return {rt: ([("make", make), ("sum", sum)], {"weights": "none"}) for rt in runtimes}
 
     records = workers.worker(["a", "b"], ["jax", "onnx"], 1, repeats=2, warmup=0, chains_of=lambda name: chains)
     assert asked == [("a", ("jax", "onnx"), 1, 2), ("b", ("jax", "onnx"), 1, 2)]

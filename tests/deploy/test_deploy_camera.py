@@ -22,7 +22,8 @@ from dsfec_jax import cli, zoo
 from dsfec_jax.data.camera.batches import eval_input
 from dsfec_jax.data.camera.sources import load_camera_images
 from dsfec_jax.modalities.image.ort import OrtCameraPredictor
-from dsfec_jax.modalities.image import export as export_camera, quantize as quantize_camera
+from dsfec_jax.modalities.image.export import export_camera
+from dsfec_jax.modalities.image.quantize import quantize_camera
 from dsfec_jax.deploy.bench import timing
 from dsfec_jax.modalities.image.bench import measured_batch_stats
 from dsfec_jax.modalities.image.ort import graph_input_hw
