@@ -287,7 +287,7 @@ def run_eval_or_predict(args) -> int:
         return cli_rd.eval_or_predict(args, checked_overrides(args.model, parse_overrides(args.set)))
     threshold = POINT_SCORE_THRESHOLD if args.score_threshold is None else args.score_threshold
     if args.runtime == "onnx":
-        from .deploy import OrtPredictor
+        from .modalities.points.ort import OrtPredictor
         if not args.onnx:
             sys.exit("--runtime onnx needs --onnx DIR (written by `dsfec export --model NAME --out DIR`)")
         predictor = OrtPredictor(args.onnx, score_threshold=threshold)
@@ -390,7 +390,7 @@ def run_ship(args) -> int:
 
 def run_export(args) -> int:
     from . import zoo
-    from .deploy import export
+    from .modalities.points.export import export
 
     if is_camera(args.model):
         from .modalities.image import cli as cli_camera
@@ -435,7 +435,7 @@ def run_quantize(args) -> int:
         from .modalities.image import cli as cli_camera
         return cli_camera.quantize(args)
     from .data.points.sources import load_frames
-    from .deploy.quantize import quantize
+    from .modalities.points.quantize import quantize
 
     out = quantize(args.onnx, args.out, load_frames("synthetic", "train", args.calib_frames, args.seed),
                    calibration=args.calibration)
@@ -466,6 +466,7 @@ def bench_models(text: str) -> list[str]:
 
 
 def run_train_bench(args) -> int:
+    from .modalities.registry import modality_of
     from .profile import training
 
     window = 96 if args.window is None else args.window
@@ -478,15 +479,16 @@ def run_train_bench(args) -> int:
         if args.readme:
             training.check_readme(args.readme)
         records = training.run(bench_models(args.models or TRAIN_BENCH_MODELS), bench_threads(args.threads or "2"),
-                               settings, compare)
+                               settings, compare, modality_of=modality_of)
     except (ValueError, RuntimeError) as err:  # unknown model or field, more threads than CPUs, a failed worker
         sys.exit(f"dsfec bench --train: {err}")
     content = training.payload(command_line(args), records, settings, compare)
     record = args.out or training.RECORD
     training.write(record, content)
     if args.readme:
-        training.update_readme(args.readme, content, record)
-    print(json.dumps(content, indent=2) if args.json else training.markdown(content, record=record))
+        training.update_readme(args.readme, content, record, modality_of=modality_of)
+    print(json.dumps(content, indent=2) if args.json
+          else training.markdown(content, record=record, modality_of=modality_of))
     return 0
 
 

@@ -50,7 +50,7 @@ from dsfec_jax.core.checkpoint import manifest_path
 from dsfec_jax.core.environment import environment
 from dsfec_jax.models.camera import paper  # the paper's numbers, one constant per table, each citing it
 from dsfec_jax.models.camera.footprint import footprint
-from dsfec_jax.profile.zoo_table import CAMERA_RECORDS
+from dsfec_jax.modalities.image.zoo_table import TABLE as CAMERA_TABLE
 
 from experiments.common import fmt
 
@@ -340,7 +340,7 @@ def main(argv=None) -> int:
     notes = [] if weights else ["No camera weights are shipped (dsfec_jax/weights/) and none were given (--weights): "
                                 "the accuracy cells are '-'."]
     latency = {}
-    for flag, paths in (("--profile", args.profile or [CAMERA_RECORDS]), ("--bench", args.bench)):
+    for flag, paths in (("--profile", args.profile or [CAMERA_TABLE.record]), ("--bench", args.bench)):
         for path in paths:
             latency.update({(r["model"], r["runtime"], r["threads"]): r for r in read_latency(path, flag)})
     finetune = read_eval(args.finetune_eval, "--finetune-eval") if args.finetune_eval else None
@@ -351,7 +351,8 @@ def main(argv=None) -> int:
     text = markdown(tables, command, notes)
     record = {"command": command, "seed": args.seed, "environment": environment(),
               "inputs": {"weights": {m: shown(p) for m, p in weights.items()}, "eval": args.eval,
-                         "finetune_eval": args.finetune_eval, "profile": [shown(p) for p in args.profile or [CAMERA_RECORDS]],
+                         "finetune_eval": args.finetune_eval,
+                         "profile": [shown(p) for p in args.profile or [CAMERA_TABLE.record]],
                          "bench": args.bench, "voc": args.voc, "frames": args.frames, "size": args.size},
               "evals": {f"{m}/{k}": r for (m, k), r in evals.items()}, "finetune": finetune,
               "latency": list(latency.values()),

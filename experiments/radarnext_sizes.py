@@ -29,6 +29,7 @@ from dsfec_jax.core.grid import VOD_GRID, Grid
 from dsfec_jax.profile import counting, latency
 from dsfec_jax.core.environment import environment
 from dsfec_jax.models.radarnext.paper import TABLE2, TABLE3
+from dsfec_jax.modalities.registry import modality_of
 
 SMALL_GRID = Grid((0.0, 12.8), (-6.4, 6.4), (-3.0, 2.0), 0.16)
 SEED = 0
@@ -73,7 +74,7 @@ def latency_suites(names: list[str], grid: Grid) -> dict:
         fused_det, fused = zoo.deploy(det, variables)
         inputs = det.dummy_inputs(1)
         for form, d, v in (("branched", det, variables), ("fused", fused_det, fused)):
-            calls = latency.stage_functions(d, v, inputs)
+            calls = latency.stage_functions(d, v, inputs, modality_of(d.config).latency_stages)
             suites[f"{name}/{form}"] = {"backbone": calls["backbone"], "total": calls["total"]}
     return suites
 

@@ -15,7 +15,8 @@ import argparse
 import json
 
 from dsfec_jax.models.dsfec import paper
-from dsfec_jax.profile.zoo_table import RECORDS, shipped_accuracy
+from dsfec_jax.modalities.points.zoo_table import TABLE as ZOO_TABLE
+from dsfec_jax.profile.zoo_table import shipped_accuracy
 
 MODELS = ("baseline", "dsfec_l", "dsfec_m", "dsfec_s")
 
@@ -41,10 +42,11 @@ def main(argv=None) -> int:
     p.add_argument("--profile-again", action="store_true", help="profile now instead of reading the records")
     args = p.parse_args(argv)
     if args.profile_again:
+        from dsfec_jax.modalities.registry import modality_of
         from dsfec_jax.profile.records import detectors_for, profile
-        records = profile(detectors_for(list(MODELS)))
+        records = profile(detectors_for(list(MODELS)), modality_of=modality_of)
     else:
-        records = json.loads(RECORDS.read_text())["records"]
+        records = json.loads(ZOO_TABLE.record.read_text())["records"]
     print(table(records))
     print("\nAccuracy: synthetic test split (nuScenes metric); the paper's is nuScenes val. "
           "'-': no shipped weights for that model yet.")

@@ -35,6 +35,7 @@ from dsfec_jax.data.points.pillarize import PillarSpec, pillar_budget
 from dsfec_jax.data.points.sources import load_frames
 from dsfec_jax.modalities.points.evaluate import validate
 from dsfec_jax.modalities.points.predict import Predictor
+from dsfec_jax.modalities.registry import modality_of
 from dsfec_jax.profile.records import profile
 from dsfec_jax.train.loss_watch import LossWatch, NonFiniteLoss
 from dsfec_jax.train.schedules import optimizer
@@ -199,7 +200,7 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
         with _timed(phases, "profile"):
             costs = measured_costs(journal, trial) or profile(
                 [zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats, warmup=1,
-                light=recipe.light_profile)[0]
+                light=recipe.light_profile, modality_of=modality_of)[0]
         journal.append({**trial, "status": "ok", **measured(scores, tables, costs),
                         "supernet": {net.field: list(getattr(cfg, net.field)), "steps": steps,
                                      "wall_s": round(supernet_s, 1), "cpu_s": round(supernet_cpu, 1)},

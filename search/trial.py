@@ -11,6 +11,7 @@ from pathlib import Path
 from dsfec_jax import zoo
 from dsfec_jax.data.points.sources import load_frames
 from dsfec_jax.core.environment import environment
+from dsfec_jax.modalities.registry import modality_of
 from dsfec_jax.profile.records import profile
 from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.modalities.points.fit import fit
@@ -144,5 +145,6 @@ def measure(trial: dict, trial_dir: Path) -> dict:
     tables = scores.pop("match_tables", {})
     # sizes and latency of the inference form (RadarNeXt: MobileOne branches fused), as the paper counts
     deployed = zoo.Detector(zoo.deploy_config(zoo.config(trial["base"], **trial["overrides"])))
-    costs = profile([deployed], timing=True, repeats=recipe.latency_repeats, warmup=1, light=recipe.light_profile)[0]
+    costs = profile([deployed], timing=True, repeats=recipe.latency_repeats, warmup=1, light=recipe.light_profile,
+                    modality_of=modality_of)[0]
     return measured(scores, tables, costs)

@@ -138,3 +138,31 @@ def test_the_family_branch_finder_can_fail():
               "from dsfec_jax.models.dsfec.net import HEAD_NAMES\nok = zoo.family_of(cfg).name != 'dsfec'\n"
               "fine = zoo.family_of(cfg).metric.name")
     assert len(family_branches(source)) == 4
+
+
+MODALITY_FREE = ("train", "deploy", "profile")  # rooms of machinery that take a Modality record from their caller
+
+
+def modality_importers(room: str) -> list[str]:
+    """The modules of `room` that import modalities/, entry points (`__main__.py`) left out."""
+    return [str(p.relative_to(PACKAGE)) for p in modules(room)
+            if p.name != "__main__.py" and "modalities" in project_imports(p)]
+
+
+@pytest.mark.parametrize("room", MODALITY_FREE)
+def test_the_modality_free_rooms_never_import_modalities(room):
+    """train/, deploy/ and profile/ are modality-free: they take a Modality record (or its verbs)
+    from their caller and never import modalities/. Entry points are the exception: a `__main__.py`
+    (`python -m dsfec_jax.profile`, `python -m dsfec_jax.deploy.bench`) looks the records up and
+    passes them in, as cli.py does."""
+    assert modality_importers(room) == []
+
+
+def test_the_modality_import_finder_can_fail(tmp_path, monkeypatch):
+    """A profile module importing modalities is found; the room's entry point is not."""
+    room = tmp_path / "dsfec_jax" / "profile"
+    room.mkdir(parents=True)
+    (room / "latency.py").write_text("from ..modalities.rd import profile as rd\n")
+    (room / "__main__.py").write_text("from ..modalities.registry import modality_of\n")
+    monkeypatch.setattr(__import__(__name__), "PACKAGE", tmp_path / "dsfec_jax")
+    assert modality_importers("profile") == ["profile/latency.py"]

@@ -1,17 +1,13 @@
-"""Deploy: export a detector (network + box decoding) to ONNX and to a serialized `jax.export`
-artifact, run the ONNX graph with ONNX Runtime from raw input to boxes (points: `export`,
-`OrtPredictor`; range-Doppler maps: `export_rd`, `OrtRDPredictor`; camera images: `export_camera`,
-`OrtCameraPredictor`), and quantize it to INT8 (`quantize`, `quantize_rd`, `quantize_camera`)."""
+"""Deploy machinery, modality-free: export a jittable detector fn to ONNX and to a serialized
+`jax.export` artifact with its manifest (`write_export`), run an export's graph with ONNX Runtime
+(`read_manifest`, `ort_session`, `run_fixed_batch`), quantize it to INT8 (`quantize_model`,
+`write_quantized`) and time it (bench/). Each modality's export, runtime predictor and quantize
+verb live in its folder (modalities/points, rd, image: export.py, ort.py, quantize.py) and are
+reached through its Modality record (`export`, `ort_predictor`, `quantize`)."""
 
-from .export import export
-from ..modalities.image.export import export_camera
-from ..modalities.rd.export import export_rd
-from .ort import OrtPredictor
-from ..modalities.image.ort import OrtCameraPredictor
-from ..modalities.rd.ort import OrtRDPredictor
-from .quantize import quantize
-from ..modalities.image.quantize import quantize_camera
-from ..modalities.rd.quantize import quantize_rd
+from .export import grouped, load_jax_export, onnx_model, write_export
+from .ort import ort_session, read_manifest, run_fixed_batch
+from .quantize import batch1_export, quantize_model, write_quantized
 
-__all__ = ["export", "export_camera", "export_rd", "OrtPredictor", "OrtCameraPredictor", "OrtRDPredictor", "quantize",
-           "quantize_camera", "quantize_rd"]
+__all__ = ["batch1_export", "grouped", "load_jax_export", "onnx_model", "ort_session", "quantize_model",
+           "read_manifest", "run_fixed_batch", "write_export", "write_quantized"]

@@ -1,5 +1,8 @@
-"""Run an exported detector with ONNX Runtime, from raw points to boxes, with the same
-interface as the JAX `Predictor` (pillarize and NMS on the host are the same code)."""
+"""The ONNX Runtime machinery every modality's runtime predictor is built on: `read_manifest` (an
+export's graph and deploy.json, checked to be of the modality its caller expects), `ort_session` (a
+CPU session with a thread count) and `run_fixed_batch` (a fixed-batch graph over any number of
+items). The predictors are the modalities': modalities/points/ort.py (OrtPredictor),
+modalities/rd/ort.py, modalities/image/ort.py."""
 
 from __future__ import annotations
 
@@ -7,10 +10,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-
-from ..data.points.pillarize import PillarSpec
-from ..core.grid import Grid
-from ..modalities.points.predict import HostPipeline
 
 
 def read_manifest(path: str | Path, modality: str | None = None) -> tuple[Path, dict]:
@@ -28,12 +27,6 @@ def read_manifest(path: str | Path, modality: str | None = None) -> tuple[Path, 
         raise ValueError(f"{manifest}: an export of the {found!r} model {info.get('model')!r}; expected a "
                          f"{modality!r} model's export")
     return model, info
-
-
-def pillar_spec(manifest: dict) -> PillarSpec:
-    p = manifest["pillars"]
-    grid = Grid(**{k: tuple(v) if isinstance(v, list) else v for k, v in p["grid"].items()})
-    return PillarSpec(grid, tuple(p["features"]), int(p["max_pillars"]), int(p["max_points"]))
 
 
 def ort_session(model_path: str | Path, threads: int | None = None):
@@ -58,20 +51,3 @@ def run_fixed_batch(run, feeds: dict, batch_size: int, model_path) -> tuple:
         raise ValueError(f"{model_path}: exported for batch {batch_size}, got {n} items")
     parts = [run({k: v[i:i + 1] for k, v in feeds.items()}) for i in range(n)]
     return tuple(np.concatenate([p[j] for p in parts]) for j in range(len(parts[0])))
-
-
-class OrtPredictor(HostPipeline):
-    """`OrtPredictor(DIR)(points_NxF | Frame) -> Detections` with onnxruntime on the CPU."""
-
-    def __init__(self, path: str | Path, score_threshold: float = 0.1, nms_iou: float = 0.2, max_boxes: int = 500,
-                 threads: int | None = None):
-        self.model_path, self.manifest = read_manifest(path, "points")
-        heads = {h: tuple(c) for h, c in self.manifest["head_classes"].items()}
-        self._setup(pillar_spec(self.manifest), heads, score_threshold, nms_iou, max_boxes)
-        self.session = ort_session(self.model_path, threads)
-        self.batch_size = int(self.manifest["batch_size"])
-
-    def run(self, batch: dict):
-        feeds = {k: np.asarray(batch[k]) for k in self.manifest["inputs"]}
-        return run_fixed_batch(lambda f: self.session.run(["boxes", "scores", "labels"], f), feeds, self.batch_size,
-                               self.model_path)

@@ -1,5 +1,7 @@
-"""Static INT8 quantization of an exported detector with onnxruntime's tools, calibrated on
-frames (synthetic by default): `quantize(EXPORT_DIR, OUT_DIR, frames)`.
+"""Static INT8 quantization of an exported detector with onnxruntime's tools, the machinery every
+modality's quantize verb is built on: `write_quantized(model, manifest, OUT_DIR, feeds)` calibrates
+on feeds the modality makes from its samples (modalities/points/quantize.py from point frames,
+modalities/rd/quantize.py from RD samples, modalities/image/quantize.py from camera images).
 
 Only the convolutions and matrix products are quantized (QDQ format, symmetric int8 weights
 per output channel, activations calibrated by min/max over the calibration frames); the
@@ -15,19 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from ..core import atomic
-from ..data.points.pillarize import pillarize, select_columns
-from .ort import pillar_spec, read_manifest
+from .ort import read_manifest
 
 QUANTIZED_OPS = ["Conv", "ConvTranspose", "MatMul", "Gemm"]
-
-
-def calibration_feeds(manifest: dict, frames) -> list[dict]:
-    spec = pillar_spec(manifest)
-    feeds = []
-    for frame in frames:
-        tensors, _ = pillarize(select_columns(frame, spec.features), spec)
-        feeds.append({k: tensors[k][None] for k in manifest["inputs"]})
-    return feeds
 
 
 def unfold_zeros(path: Path, min_bytes: int = 4096) -> None:
@@ -92,13 +84,6 @@ def batch1_export(export_dir: str | Path, modality: str) -> tuple[Path, dict]:
     if manifest["batch_size"] != 1:
         raise ValueError(f"{model}: calibrate a batch-1 export (this one has batch {manifest['batch_size']})")
     return model, manifest
-
-
-def quantize(export_dir: str | Path, out_dir: str | Path, frames, per_channel: bool = True,
-             calibration: str = "minmax") -> dict:
-    """Write OUT_DIR/model.onnx (INT8 QDQ) and its deploy.json -> {'onnx', 'manifest', sizes}."""
-    model, manifest = batch1_export(export_dir, "points")
-    return write_quantized(model, manifest, out_dir, calibration_feeds(manifest, frames), per_channel, calibration)
 
 
 def write_quantized(model: Path, manifest: dict, out_dir: str | Path, feeds: list[dict], per_channel: bool,

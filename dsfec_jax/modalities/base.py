@@ -66,10 +66,15 @@ class Modality:
     `ort_predictor(export_dir, **options)` the same over an ONNX export.
     Scoring: `protocols` (metric name -> Protocol): the names a Family's MetricProtocol may hold.
     Deploy: `export(detector, variables, out_dir, **options)`; `quantize(export_dir, out_dir,
-    samples, **options)`; `bench_chains(name, runtimes, threads, workdir, repeats)` (deploy.bench).
-    Profiling: `stage_name(module path)` -> the stage a parameter counts in; `latency_stages(detector,
-    variables, inputs)` -> {stage: callable}; `train_bench_fields(name, settings)` and
-    `train_bench_batches(name, overrides, settings)` (profile.training); `zoo_table`.
+    samples, **options)`; `bench_chains(name, runtimes, threads, workdir, repeats)` -> runtime ->
+    (chain of (stage, fn) from raw input to boxes, record fields) (deploy.bench times them).
+    Profiling (profile/ asks these; it never imports this room): `stage_name(module path)` -> the
+    stage a parameter or layer counts in; `latency_stages(detector, variables, inputs)` -> {stage:
+    jitted zero-argument callable}; `size_fields(variables)` -> the record's extra size fields;
+    `train_bench_fields(name, settings)` -> the config fields the train bench sets and
+    `train_bench_batches(name, overrides, settings)` -> (detector, device batches, windows)
+    (profile.training); `train_bench_note(records, settings)` -> what the train-bench table's footer
+    says of this modality's records ('' for none); `zoo_table` (the README zoo table).
     Commands: `commands` (the CLI's verbs)."""
 
     name: str
@@ -84,6 +89,8 @@ class Modality:
     bench_chains: Callable[..., dict]
     stage_name: Callable[[tuple], str]
     latency_stages: Callable[..., dict]
+    size_fields: Callable[[dict], dict]
     train_bench_fields: Callable[..., dict]
     train_bench_batches: Callable[..., tuple]
+    train_bench_note: Callable[[list, dict], str]
     zoo_table: ZooTable

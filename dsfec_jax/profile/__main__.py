@@ -2,9 +2,14 @@
 
 Prints one record per model (params, GFLOPs per stage with XLA's count beside it, memory,
 jitted batch-1 latency per stage), for any zoo family: range-Doppler models (yolov8n, ...) are
-profiled on 256 x 64 maps with their own stages (rd.py), camera models (shuffle_yolov3,
+profiled on 256 x 64 maps with their own stages (modalities/rd/profile.py), camera models (shuffle_yolov3,
 yolov3_darknet53) on 416 x 416 images (stages backbone / head; memory by the Shuffle-YOLOv3
 paper's formula). --threads must be handled before XLA starts (first jax computation).
+
+An entry point: it looks each model's Modality record up (modalities.registry) and passes it to the
+modality-free profiler. `--tables-only --readme README.md` rebuilds the zoo tables from the stored
+records without profiling; `--train-worker ...` is the train bench's worker process
+(profile/training.py's `run` launches it; users run `dsfec bench --train`).
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--threads", type=int, default=None, help="CPU threads for XLA (the process is pinned to this many CPUs)")
     p.add_argument("--out", default=None, help="also write {command, records} JSON here (atomically)")
     p.add_argument("--readme", default=None, help="regenerate the zoo table(s) in this README from the records (zoo_table.py: one per modality)")
+    p.add_argument("--tables-only", action="store_true",
+                   help="with --readme: rebuild every zoo table from its stored record file, profiling nothing")
     return p.parse_args(argv)
 
 
@@ -63,31 +70,53 @@ def human(records: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def tables_only(args) -> int:
+    """--tables-only: the README's zoo tables rebuilt from the stored records (no profiling)."""
+    from ..modalities.registry import MODALITIES
+    from . import zoo_table
+
+    if not args.readme:
+        sys.exit("--tables-only needs --readme README.md (the file whose zoo tables are rebuilt)")
+    zoo_table.rebuild_readme(args.readme, MODALITIES.values())
+    return 0
+
+
 def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["--train-worker"]:
+        from ..modalities.registry import modality_of
+        from . import training
+
+        return training.worker_main(argv[1:], modality_of)
     args = parse(argv)
+    if args.tables_only:
+        return tables_only(args)
     set_threads(args.threads)
     from ..core import atomic
     from .. import zoo
+    from ..modalities.registry import modality_of
     from . import compare, records, zoo_table
 
     names = [n.strip() for n in args.models.split(",") if n.strip()]
     unknown = [n for n in names if n not in zoo.available()]
     if unknown:
         sys.exit(f"unknown model(s) {unknown}; available: {zoo.available()}")
-    recs = records.profile(records.detectors_for(names), not args.no_latency, args.repeats, args.warmup)
+    recs = records.profile(records.detectors_for(names), not args.no_latency, args.repeats, args.warmup,
+                           modality_of=modality_of)
     print(json.dumps(recs, indent=2) if args.json else human(recs))
     if args.paper:
-        points = any(zoo.family_of(n).modality == "points" for n in names)
-        rows = compare.table1_rows(recs) + (compare.table2_rows() + compare.table3_rows() if points else [])
+        dsfec = modality_of(compare.TABLE2_BASE)  # DSFEC's Tables 2-3: shown beside any model of its modality
+        mine = any(modality_of(n) is dsfec for n in names)
+        rows = compare.table1_rows(recs) + (compare.table2_rows(dsfec) + compare.table3_rows(dsfec) if mine else [])
         rows += compare.rd_rows(recs)
         print(json.dumps(rows, indent=2) if args.json else "\n" + compare.markdown(rows))
     if args.out or args.readme:
-        command = "python -m dsfec_jax.profile " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
+        command = "python -m dsfec_jax.profile " + " ".join(shlex.quote(a) for a in argv)
         payload = {"command": command, "records": recs}
         if args.out:
             atomic.write_json(args.out, payload)
         if args.readme:
-            zoo_table.update_readme(args.readme, payload)
+            zoo_table.update_readme(args.readme, payload, modality_of)
     return 0
 
 

@@ -31,10 +31,12 @@ def table1_rows(records: list[dict]) -> list[dict]:
     return rows
 
 
-def table2_rows() -> list[dict]:
+def table2_rows(modality) -> list[dict]:
+    """Table 2 (stem filters): `modality` is DSFEC's Modality record (its stage names hold 'stem')."""
     rows = []
     for filters, ref in paper.TABLE2.items():
-        rec = size_record(zoo.create(TABLE2_BASE, stem_filters=filters, name=f"{TABLE2_BASE}[stem={filters}]"))
+        rec = size_record(zoo.create(TABLE2_BASE, stem_filters=filters, name=f"{TABLE2_BASE}[stem={filters}]"),
+                          modality)
         stem = rec["gflops_per_stage"]["stem"]
         rows.append({"table": "2", "config": rec["model"], "metric": "memory_mb", "paper": ref["memory_mb"],
                      "ours": rec["memory_mb"], "rel_err": rel(rec["memory_mb"], ref["memory_mb"])})
@@ -43,10 +45,12 @@ def table2_rows() -> list[dict]:
     return rows
 
 
-def table3_rows() -> list[dict]:
+def table3_rows(modality) -> list[dict]:
+    """Table 3 (stage-2 blocks): `modality` is DSFEC's Modality record."""
     rows = []
     for blocks, ref in paper.TABLE3.items():
-        rec = size_record(zoo.create("dsfec_l", stage_blocks=(3, blocks, 6, 3), name=f"dsfec_l[stage2={blocks}]"))
+        rec = size_record(zoo.create("dsfec_l", stage_blocks=(3, blocks, 6, 3), name=f"dsfec_l[stage2={blocks}]"),
+                          modality)
         rows.append({"table": "3", "config": rec["model"], "metric": "gflops", "paper": ref["gflops"],
                      "ours": rec["gflops"], "rel_err": rel(rec["gflops"], ref["gflops"])})
     return rows

@@ -7,10 +7,11 @@ Conventions (stated in every record):
   detection papers quote them; elementwise work (BN, activations, adds) is not counted.
   Transposed convs count only the non-zero taps. The pillar net is counted on all of its
   max_pillars x max_points slots, because the dense tensor is what runs.
-- stages: a point network's top-level modules grouped as `stage_of` groups them (stem,
-  stage1..4, neck, heads, pillar_net); a range-Doppler network's (modality 'rd') are its
-  top-level parts as they are: backbone, adapter, neck, head (`part_of`); so are a camera
-  network's (modality 'image'): backbone, head (the YOLOv3 FPN and its three output convs).
+- stages: the caller's grouping of module paths (its modality's `stage_name`): a point network's
+  top-level modules grouped into stem, stage1..4, neck, heads, pillar_net
+  (modalities/points/profile.stage_of); a range-Doppler network's top-level parts as they are:
+  backbone, adapter, neck, head (`part_of`, the default); so are a camera network's: backbone,
+  head (the YOLOv3 FPN and its three output convs).
 """
 
 from __future__ import annotations
@@ -22,38 +23,17 @@ import flax.linen as nn
 import jax
 import numpy as np
 
-from .. import zoo
-
 PARAMS_CONVENTION = "params collection (weights, biases, BN scale/offset); BN moving stats excluded"
 FLOPS_CONVENTION = "2 x MACs of conv/deconv/linear layers at batch 1; pillar net on all P x N slots"
 
 
-def stage_of(path: tuple[str, ...]) -> str:
-    """Group a module path into the profiler's stages."""
-    top = path[0] if path else "?"
-    if top.startswith("stem"):
-        return "stem"
-    if top.startswith("stage"):
-        return top.split("_")[0]
-    if top.startswith("head"):
-        return "heads"
-    return top
-
-
 def part_of(path: tuple[str, ...]) -> str:
-    """A range-Doppler or camera network's stage: its top-level part (backbone, adapter, neck, head)."""
+    """A module path's top-level part (a range-Doppler or camera network's backbone, adapter, neck,
+    head): the grouping when the caller names none."""
     return path[0] if path else "?"
 
 
-STAGE_NAMES = {"points": stage_of, "rd": part_of, "image": part_of}  # modality -> module path -> stage
-
-
-def stage_namer(detector):
-    """The stage grouping of `detector`'s modality."""
-    return STAGE_NAMES[zoo.family_of(detector.config).modality]
-
-
-def count_params(variables: dict, stage_name=stage_of) -> dict:
+def count_params(variables: dict, stage_name=part_of) -> dict:
     """Total and per-stage parameter counts of a variables tree (`stage_name`: module path -> stage)."""
     per_stage: dict[str, int] = collections.Counter()
     for path, leaf in jax.tree_util.tree_flatten_with_path(variables["params"])[0]:
@@ -80,10 +60,10 @@ def layer_macs(detector, batch_size: int = 1, inputs: dict | None = None) -> lis
     return rows
 
 
-def count_gflops(detector, inputs: dict | None = None) -> dict:
-    """Analytic GFLOPs (2 x MACs) in total and per stage, at batch 1 (or on `inputs`)."""
+def count_gflops(detector, inputs: dict | None = None, stage_name=part_of) -> dict:
+    """Analytic GFLOPs (2 x MACs) in total and per stage (`stage_name`: module path -> stage, the
+    modality's `Modality.stage_name`), at batch 1 (or on `inputs`)."""
     per_stage: dict[str, float] = collections.Counter()
-    stage_name = stage_namer(detector)
     for path, _, macs in layer_macs(detector, 1, inputs):
         per_stage[stage_name(path)] += 2 * macs / 1e9
     return {"total": sum(per_stage.values()), "per_stage": dict(per_stage)}

@@ -7,14 +7,10 @@ interleaved loop (A B A B ...) and medians and ratios are what to quote.
 from __future__ import annotations
 
 import time
+from typing import Callable
 
 import jax
 import numpy as np
-
-from .. import zoo
-
-STAGES = ("pillar_net", "backbone", "neck_heads")  # a point network's; a range-Doppler one's: rd.LATENCY_STAGES
-CAMERA_STAGES = ("features", "head")  # a camera network's (models/camera/net.py's stage methods)
 
 
 def timing_variables(detector, seed: int = 0) -> dict:
@@ -39,30 +35,14 @@ def timing_variables(detector, seed: int = 0) -> dict:
     return jax.tree_util.tree_map_with_path(fill, shapes)
 
 
-def stage_functions(detector, variables, inputs, per_stage: bool = True) -> dict:
-    """name -> zero-argument callable that runs that stage (jitted, compiled, blocking);
-    per_stage=False: the whole network only. Range-Doppler models have their own stages (rd.py),
-    camera models theirs (CAMERA_STAGES: the backbone's features, then the YOLOv3 head on them)."""
-    from ..modalities.rd import profile as rd
-
+def stage_functions(detector, variables, inputs, stages: Callable[..., dict] | None = None) -> dict:
+    """name -> zero-argument callable that runs that stage (jitted, compiled, blocking): 'total',
+    the whole network, and with `stages` (the modality's `latency_stages(detector, variables,
+    inputs)` -> {stage: jitted callable}) each of its stages."""
     full = jax.jit(detector.apply)
     calls = {"total": lambda: full(variables, inputs)}
-    modality = zoo.family_of(detector.config).modality
-    if per_stage and modality == "rd":
-        calls.update(rd.stage_functions(detector, variables, inputs))
-    elif per_stage and modality == "image":
-        feats_fn = jax.jit(lambda v, x: detector.apply_method(v, "features", x["image"]))
-        head_fn = jax.jit(lambda v, f: detector.apply_method(v, "head_outputs", f))
-        feats = feats_fn(variables, inputs)
-        calls.update(features=lambda: feats_fn(variables, inputs), head=lambda: head_fn(variables, feats))
-    elif per_stage:
-        enc = jax.jit(lambda v, x: detector.apply_method(v, "encode", x["points"], x["mask"], x["coords"]))
-        bb = jax.jit(lambda v, img: detector.apply_method(v, "backbone", img))
-        det = jax.jit(lambda v, st: detector.apply_method(v, "detect", st))
-        image = enc(variables, inputs)
-        stages = bb(variables, image)
-        calls.update(pillar_net=lambda: enc(variables, inputs), backbone=lambda: bb(variables, image),
-                     neck_heads=lambda: det(variables, stages))
+    if stages is not None:
+        calls.update(stages(detector, variables, inputs))
     return {k: (lambda f=f: jax.block_until_ready(f())) for k, f in calls.items()}
 
 

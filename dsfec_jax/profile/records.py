@@ -1,23 +1,29 @@
-"""One record per model: params, GFLOPs, memory and latency, with conventions and machine."""
+"""One record per model: params, GFLOPs, memory and latency, with conventions and machine.
+
+What differs by input modality comes from the caller's Modality record (its `stage_name`,
+`latency_stages` and `size_fields`): `size_record(detector, modality)`, and `profile(detectors,
+modality_of=...)` with the lookup of a config's record (modalities.registry.modality_of)."""
 
 from __future__ import annotations
+
+from typing import Any, Callable
 
 import jax
 
 from .. import zoo
 from . import counting, latency, memory
-from ..modalities.rd import profile as rd
 from ..core.environment import environment
 
 
-def size_record(detector, xla: bool = True) -> dict:
-    """Everything but latency: params, analytic and XLA GFLOPs, memory (no timing loop).
+def size_record(detector, modality, xla: bool = True) -> dict:
+    """Everything but latency: params, analytic and XLA GFLOPs, memory (no timing loop), grouped in
+    stages and completed with the fields of `modality` (the detector's Modality record).
     xla=False skips the compile behind the XLA columns (a search's light profile)."""
     # sizes read shapes only: tracing init (no compile) is enough, and XLA's columns lower on shapes
     variables = jax.eval_shape(detector.init, jax.random.key(0))
     inputs = detector.dummy_inputs(1)
-    params = counting.count_params(variables, counting.stage_namer(detector))
-    flops = counting.count_gflops(detector)
+    params = counting.count_params(variables, modality.stage_name)
+    flops = counting.count_gflops(detector, stage_name=modality.stage_name)
     cfg = detector.config
     record = {
         "model": cfg.name,
@@ -33,8 +39,7 @@ def size_record(detector, xla: bool = True) -> dict:
         "memory_convention": memory.convention(detector),
         "notes": cfg.notes,
     }
-    if rd.is_rd(detector):
-        record.update(rd.size_fields(variables))
+    record.update(modality.size_fields(variables))
     if xla:
         compiled = counting.compile_network(detector, variables, inputs)
         xla_gflops = counting.xla_gflops(compiled)
@@ -43,16 +48,20 @@ def size_record(detector, xla: bool = True) -> dict:
     return record
 
 
-def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int = 3, light: bool = False) -> list[dict]:
+def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int = 3, light: bool = False, *,
+            modality_of: Callable[[Any], Any]) -> list[dict]:
     """Records for `detectors`; latencies come from one interleaved loop over all of them.
+    `modality_of(config)` -> the config's Modality record (modalities.registry.modality_of).
     light=True: no XLA columns and only the whole network timed (one compile per model, not five)."""
-    records = [size_record(d, xla=not light) for d in detectors]
+    modalities = [modality_of(d.config) for d in detectors]
+    records = [size_record(d, m, xla=not light) for d, m in zip(detectors, modalities)]
     env = environment()
     if timing:
         suites = {}
-        for d in detectors:
+        for d, m in zip(detectors, modalities):
             variables = latency.timing_variables(d)
-            suites[d.name] = latency.stage_functions(d, variables, d.dummy_inputs(1), per_stage=not light)
+            stages = None if light else m.latency_stages
+            suites[d.name] = latency.stage_functions(d, variables, d.dummy_inputs(1), stages)
         times = latency.time_interleaved(suites, repeats, warmup)
         for rec, d in zip(records, detectors):
             t = times[rec["model"]]

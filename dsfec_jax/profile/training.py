@@ -2,17 +2,13 @@
 step, with its parts (eval forward, train-mode forward, fwd + bwd), compile times kept apart,
 achieved GFLOP/s against an sgemm peak measured in the same process, and where a step's time goes.
 
-The batches are real training batches, made as training makes them (train/fit.py): frames of the
-family's embedded benchmark, augmented, pillarized for a training window of `window` cells and
-given the family's targets by `data.batches.BatchStream`. A few are built before any timing, so
-host work is not in the device figures. A family whose network takes the window's origin as an
-input (Family.origin_input) trains every window with one network, so its batches come from
-several windows; the others compile one step per window (all of one shape), so their batches
-all come from the first window. Range-Doppler models (modality 'rd') train on whole RD maps
-made as train/fit_rd.py makes them (training_rd.py), and camera models (modality 'image') on
-letterboxed street images made as train/fit_camera.py makes them (training_camera.py: one input
-size, `Settings.image_size` on the long side, 256 x 416 at the default 416); the point settings
-(window, pillar slots) apply to neither, so one `--models` list may hold every kind.
+The batches are real training batches, made as training makes them, by the model's modality
+(`Modality.train_bench_batches`, which the caller's record supplies: modalities/points/train_bench.py
+pillarizes augmented frames of the family's benchmark for a training window of `window` cells,
+modalities/rd/train_bench.py makes whole RD maps, modalities/image/train_bench.py letterboxed street
+images at `Settings.image_size` on the long side); the point settings (window, pillar slots) apply
+to the point models alone, so one `--models` list may hold every kind. A few batches are built
+before any timing, so host work is not in the device figures.
 
 Each timed program is compiled ahead (`jax.jit(f).lower(...).compile()`, timed: the compile
 time), then every program of every config, and the two sgemm references (XLA's and numpy's
@@ -21,7 +17,8 @@ all of them alike; the figures are medians after warm-up. The machine peak is th
 called back to back after that loop: between the models' programs they run slower (XLA's ~1.45x,
 measured), which would understate the peak and overstate every '% of peak'. Then a few steps are
 traced with the XLA profiler and their time split by module, phase and op (op_breakdown.py).
-`run` measures each (model, thread count) in a fresh worker process pinned to that many CPUs
+`run` measures each (model, thread count) in a fresh worker process (`python -m
+dsfec_jax.profile --train-worker`, whose entry point looks the model's modality up) pinned to that many CPUs
 before XLA starts (core/threads.py; as deploy/bench/workers.py does), so models do not disturb
 each other and the thread count is XLA's pool size.
 
@@ -31,11 +28,6 @@ formulation switch measured before against after in one run.
 """
 
 from __future__ import annotations
-
-if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
-    from ..core.host_memory import prepare_xla_process
-
-    prepare_xla_process()  # may restart this command (core/host_memory.py)
 
 import dataclasses
 import functools
@@ -60,8 +52,6 @@ from ..core import atomic, host_memory
 from ..core import threads as thread_control
 from ..core.defaults import RUN_PILLARS
 from . import counting, op_breakdown
-from ..modalities.image import train_bench as training_camera
-from ..modalities.rd import train_bench as training_rd
 
 PROGRAMS = ("eval_forward", "train_forward", "fwd_bwd", "step")
 SGEMM_N = 2048
@@ -124,52 +114,10 @@ class Settings:
 
 # ---- inputs -------------------------------------------------------------------------------------
 
-def is_rd(name: str) -> bool:
-    return zoo.family_of(name).modality == "rd"
-
-
-def is_camera(name: str) -> bool:
-    return zoo.family_of(name).modality == "image"
-
-
-def model_overrides(name: str, settings: Settings) -> dict:
-    """The config fields the settings set on model `name`: the pillar slots of a point model; a
-    camera model's classes are its benchmark's (training_camera.class_fields)."""
-    if is_camera(name):
-        return training_camera.class_fields()
-    return {} if is_rd(name) else {"max_pillars": settings.max_pillars}
-
-
-def training_batches(name: str, overrides: dict, settings: Settings) -> tuple[zoo.Detector, list[dict], int]:
-    """(the network a step trains, `distinct_batches` device batches {'inputs', 'targets'}, the
-    number of training windows), made as train/fit.py makes them (RD models: training_rd.py; camera
-    models: training_camera.py)."""
-    if is_rd(name):
-        return training_rd.training_batches(name, overrides, settings)
-    if is_camera(name):
-        return training_camera.training_batches(name, overrides, settings)
-    from ..data.batches import BatchStream
-    from ..data.points.augment import AugmentConfig
-    from ..data.points.pillarize import PillarSpec
-    from ..data.points.sources import load_frames
-    from ..modalities.points.fit import window_detectors
-
-    cfg = zoo.config(name, **overrides)
-    family = zoo.family_of(cfg)
-    used = settings.batch * settings.distinct_batches
-    frames = load_frames(family.benchmark, "train", max(used, settings.budget_frames), settings.seed,
-                         features=family.points.input_columns)
-    # slots sized as a training run on this benchmark sizes them (train.fit), not on the few frames timed
-    windows = window_detectors(name, overrides, settings.window, frames if settings.size_pillars else None)
-    frames = [frames[i] for i in range(used)]
-    stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.points.targets(cfg), settings.batch,
-                         settings.seed, AugmentConfig(), origin_input=family.points.origin_input)
-    # cycled windows: step s trains window s % n; one network serves all windows only with origin inputs
-    stride = 1 if family.points.origin_input else len(windows)
-    batches = [stream.batch(k * stride) for k in range(settings.distinct_batches)]
-    if not family.points.origin_input and any(b["window"] != 0 for b in batches):
-        raise RuntimeError("train bench: expected every batch on the first window (BatchStream cycles windows)")
-    return windows[0], [jax.device_put({"inputs": b["inputs"], "targets": b["targets"]}) for b in batches], len(windows)
+def model_overrides(name: str, settings: Settings, modality) -> dict:
+    """The config fields the settings set on model `name` (its Modality record's
+    `train_bench_fields`: a point model's pillar slots, a camera model's benchmark classes)."""
+    return modality.train_bench_fields(name, settings)
 
 
 # ---- programs -----------------------------------------------------------------------------------
@@ -218,13 +166,14 @@ class Workload:
         jax.block_until_ready(out)
 
 
-def build_workload(name: str, label: str, overrides: dict, settings: Settings) -> Workload:
-    """Batches, fresh state and the four compiled programs of `name` with `overrides`."""
+def build_workload(name: str, label: str, overrides: dict, settings: Settings, modality) -> Workload:
+    """Batches (`modality.train_bench_batches`, made as training makes them), fresh state and the
+    four compiled programs of `name` with `overrides`."""
     from ..train.schedules import get_schedule, optimizer
     from ..train.step import init_state, loss_function, make_train_step
 
-    overrides = {**model_overrides(name, settings), **overrides}
-    det, batches, windows = training_batches(name, overrides, settings)
+    overrides = {**model_overrides(name, settings, modality), **overrides}
+    det, batches, windows = modality.train_bench_batches(name, overrides, settings)
     schedule = zoo.family_of(name).schedules[STEP_SCHEDULE]
     tx = optimizer(get_schedule(schedule, batch_size=settings.batch), 1000)
     state = init_state(det, tx, jax.random.key(settings.seed))
@@ -371,15 +320,16 @@ def step_breakdown(w: Workload, settings: Settings, threads: int) -> dict:
 # ---- one model, in this process -----------------------------------------------------------------
 
 def measure(name: str, settings: Settings, compare: dict | None = None, threads: int | None = None,
-            base: dict | None = None) -> dict:
+            base: dict | None = None, *, modality) -> dict:
     """Every figure of model `name` (and of its `compare` config, interleaved), in this process.
-    `base`: config overrides of both configs (the tests' tiny shapes)."""
+    `base`: config overrides of both configs (the tests' tiny shapes); `modality`: the model's
+    Modality record."""
     from ..core.environment import cpu_model, xla_threads
     from ..core.provenance import versions
 
     base = dict(base or {})
     configs = [("default", base)] + ([("compare", {**base, **compare})] if compare else [])
-    workloads = [build_workload(name, label, overrides, settings) for label, overrides in configs]
+    workloads = [build_workload(name, label, overrides, settings, modality) for label, overrides in configs]
     references = sgemms()
     samples = time_interleaved(workloads, references, settings)
     alone = time_alone(references, settings)
@@ -436,25 +386,28 @@ def parse_compare(text: str | None) -> dict:
     return out
 
 
-def check_models(models: list[str], settings: Settings, compare: dict | None) -> None:
-    """Refuse unknown models and compare fields (naming them) before any worker starts."""
+def check_models(models: list[str], settings: Settings, compare: dict | None,
+                 modality_of: Callable[[str], Any]) -> None:
+    """Refuse unknown models and compare fields (naming them) before any worker starts;
+    `modality_of(name)` -> the model's Modality record."""
     unknown = [m for m in models if m not in zoo.available()]
     if unknown:
         raise ValueError(f"unknown model(s) {unknown}; available: {zoo.available()}")
     for name in models:
         for label, overrides in (("default config", {}), (f"--compare {_overrides_text(compare)}", compare or {})):
             try:
-                zoo.config(name, **{**model_overrides(name, settings), **overrides})
+                zoo.config(name, **{**model_overrides(name, settings, modality_of(name)), **overrides})
             except (TypeError, ValueError) as err:
                 raise ValueError(f"{label}: {err}") from None
 
 
-def worker_main(argv=None) -> int:
-    """`python -m dsfec_jax.profile.training --model M --threads T --settings JSON [--compare JSON]
-    --out PATH`: one model in this process, pinned to T CPUs before XLA starts."""
+def worker_main(argv, modality_of: Callable[[str], Any]) -> int:
+    """`python -m dsfec_jax.profile --train-worker --model M --threads T --settings JSON [--compare
+    JSON] --out PATH` (the entry point passes `modality_of`): one model in this process, pinned to T
+    CPUs before XLA starts."""
     import argparse
 
-    p = argparse.ArgumentParser(prog="python -m dsfec_jax.profile.training")
+    p = argparse.ArgumentParser(prog="python -m dsfec_jax.profile --train-worker")
     p.add_argument("--model", required=True)
     p.add_argument("--threads", type=int, required=True)
     p.add_argument("--settings", required=True, help="Settings as JSON")
@@ -463,15 +416,18 @@ def worker_main(argv=None) -> int:
     a = p.parse_args(argv)
     thread_control.pin(a.threads)  # before the first jax computation: XLA sizes its pool from it
     settings = Settings(**json.loads(a.settings))
-    record = measure(a.model, settings, json.loads(a.compare) if a.compare else None, a.threads)
+    record = measure(a.model, settings, json.loads(a.compare) if a.compare else None, a.threads,
+                     modality=modality_of(a.model))
     Path(a.out).write_text(json.dumps(record))
     return 0
 
 
 def run(models: list[str], threads: list[int], settings: Settings, compare: dict | None = None,
-        log: Callable[[str], None] = lambda line: print(line, file=sys.stderr, flush=True)) -> list[dict]:
-    """Each (model, thread count) measured in a fresh worker process -> their records."""
-    check_models(models, settings, compare)
+        log: Callable[[str], None] = lambda line: print(line, file=sys.stderr, flush=True), *,
+        modality_of: Callable[[str], Any]) -> list[dict]:
+    """Each (model, thread count) measured in a fresh worker process (`python -m dsfec_jax.profile
+    --train-worker`, which looks the model's modality up itself) -> their records."""
+    check_models(models, settings, compare, modality_of)
     for t in threads:
         thread_control.check(t)
     records = []
@@ -480,8 +436,8 @@ def run(models: list[str], threads: list[int], settings: Settings, compare: dict
             log(f"train bench: {name}, {t} thread(s)" + (f", compare {compare}" if compare else ""))
             with tempfile.TemporaryDirectory() as tmp:
                 out = Path(tmp) / "record.json"
-                cmd = [sys.executable, "-m", "dsfec_jax.profile.training", "--model", name, "--threads", str(t),
-                       "--settings", json.dumps(dataclasses.asdict(settings)), "--out", str(out)]
+                cmd = [sys.executable, "-m", "dsfec_jax.profile", "--train-worker", "--model", name,
+                       "--threads", str(t), "--settings", json.dumps(dataclasses.asdict(settings)), "--out", str(out)]
                 if compare:
                     cmd += ["--compare", json.dumps(_jsonable(compare))]
                 proc = subprocess.run(cmd, env={**os.environ, "OMP_NUM_THREADS": str(t)}, capture_output=True, text=True)
@@ -525,9 +481,11 @@ def _slots_text(settings: dict) -> str:
     return f"{settings['max_pillars']} pillar slots"
 
 
-def markdown(content: dict, breakdown_rows: int = 6, full: bool = True, record: str | Path = RECORD) -> str:
+def markdown(content: dict, breakdown_rows: int = 6, full: bool = True, record: str | Path = RECORD, *,
+             modality_of: Callable[[str], Any]) -> str:
     """The figures table, the comparison table (with --compare) and each step's breakdown
-    (full=False: its module table only); `record`: the file the content was written to."""
+    (full=False: its module table only); `record`: the file the content was written to;
+    `modality_of(name)` -> a model's Modality record (its `train_bench_note` ends the footer)."""
     records = content["records"]
     lines = ["| model | config | threads | pillar slots | train frames/s | step ms | eval fwd ms | train fwd ms | fwd+bwd ms "
              "| fwd+bwd / eval (p10-p90 by repetition) | step GFLOP/s (3 x fwd) | % sgemm | step GFLOP/s (XLA) | % sgemm | sgemm GFLOP/s (XLA / numpy) "
@@ -562,7 +520,7 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True, record: 
                   f"{s['warmup']} warm-up, each program timed right after {s.get('lead_in', 0)} untimed "
                   f"call(s) of itself (steady state). Analytic GFLOP/s count {content['flops_convention']}. Peak: "
                   f"{content['peak_convention']}. Record: `{_record_text(record)}`."
-                  + _rd_note(records, s) + _camera_note(records, s)]
+                  + _notes(records, s, modality_of)]
     for r in records:
         for c in r["configs"]:
             if c.get("breakdown"):
@@ -578,33 +536,20 @@ def _record_text(record: str | Path) -> str:
     return str(path.relative_to(root)) if path.is_relative_to(root) else str(record)
 
 
-def _model_names(records: list[dict]) -> str:
+def model_names(records: list[dict]) -> str:
     """Each model once, in order (a model measured at several thread counts has several records)."""
     return ", ".join(dict.fromkeys(r["model"] for r in records))
 
 
-def _rd_note(records: list[dict], settings: dict) -> str:
-    """What differs for the range-Doppler records of a table ('' when it has none)."""
-    rd = [r for r in records if r.get("family") and zoo.FAMILIES[r["family"]].modality == "rd"]
-    if not rd:
-        return ""
-    shape = next(iter(rd[0]["configs"][0]["input"].values()))
-    return (f" Range-Doppler models ({_model_names(rd)}): batch {settings['batch']} whole "
-            f"{shape[1]} x {shape[2]} RD maps (heat and gray) of the synthetic RD benchmark, augmented and with "
-            "padded box targets as train/fit_rd.py makes them; windows and pillar slots do not apply; the step is the "
-            "family's quick schedule's (ultralytics' SGD summing gradients to a nominal batch of 64).")
-
-
-def _camera_note(records: list[dict], settings: dict) -> str:
-    """What differs for the camera records of a table ('' when it has none)."""
-    camera = [r for r in records if r.get("family") and zoo.FAMILIES[r["family"]].modality == "image"]
-    if not camera:
-        return ""
-    shape = next(iter(camera[0]["configs"][0]["input"].values()))
-    return (f" Camera models ({_model_names(camera)}): batch {settings['batch']} street train "
-            f"images letterboxed to {shape[1]} x {shape[2]} with darknet's augmentations and padded box targets as "
-            "train/fit_camera.py makes them (one input size, no multi-scale), the street benchmark's 5 classes; "
-            "windows and pillar slots do not apply; the step is the family's quick schedule's (AdamW).")
+def _notes(records: list[dict], settings: dict, modality_of: Callable[[str], Any]) -> str:
+    """What differs for each modality's records (`Modality.train_bench_note`), in the order the
+    modalities first appear; records written before they named their family have none."""
+    groups: dict[str, tuple[Any, list]] = {}
+    for r in records:
+        if r.get("family"):
+            modality = modality_of(r["model"])
+            groups.setdefault(modality.name, (modality, []))[1].append(r)
+    return "".join(modality.train_bench_note(recs, settings) for modality, recs in groups.values())
 
 
 def check_readme(readme: str | Path) -> str:
@@ -617,10 +562,12 @@ def check_readme(readme: str | Path) -> str:
     return text
 
 
-def update_readme(readme: str | Path, content: dict, record: str | Path = RECORD) -> None:
+def update_readme(readme: str | Path, content: dict, record: str | Path = RECORD, *,
+                  modality_of: Callable[[str], Any]) -> None:
     """Replace the text between the train-bench markers of `readme` with the table."""
     text = check_readme(readme)
-    block = f"{README_START}\n{markdown(content, breakdown_rows=5, full=False, record=record)}\n{README_END}"
+    table = markdown(content, breakdown_rows=5, full=False, record=record, modality_of=modality_of)
+    block = f"{README_START}\n{table}\n{README_END}"
     text = re.sub(re.escape(README_START) + ".*?" + re.escape(README_END), lambda _: block, text, flags=re.S)
     atomic.write_text(readme, text)
 
@@ -639,6 +586,3 @@ def _jsonable(obj):
 
     return jsonable(obj)
 
-
-if __name__ == "__main__":
-    raise SystemExit(worker_main())

@@ -157,7 +157,7 @@ def jax_measure(space: SearchSpace, repeats: int = 10, warmup: int = 2) -> Measu
         suites = {}
         for genes in subnets:
             det = zoo.create(space.base, **space.overrides(genes))
-            suites[key(genes)] = stage_functions(det, timing_variables(det), det.dummy_inputs(1), per_stage=False)
+            suites[key(genes)] = stage_functions(det, timing_variables(det), det.dummy_inputs(1))
         times = time_interleaved(suites, repeats, warmup)
         return [times[key(g)]["total"]["median_ms"] for g in subnets]
 

@@ -12,8 +12,9 @@ from dsfec_jax import zoo
 from dsfec_jax.core.grid import Grid
 from dsfec_jax.data.points.pillarize import PillarSpec, pillarize, select_columns
 from dsfec_jax.data.points.sources import load_frames
-from dsfec_jax.deploy import OrtPredictor, export
-from dsfec_jax.deploy.export import end_to_end, load_jax_export, map_outputs
+from dsfec_jax.deploy.export import load_jax_export
+from dsfec_jax.modalities.points.export import end_to_end, export, map_outputs
+from dsfec_jax.modalities.points.ort import OrtPredictor
 from dsfec_jax.modalities.points.predict import Predictor
 from conftest import tiny
 
@@ -284,3 +285,26 @@ def test_radarnext_exports_fused_with_dcnv3_and_matches_the_branched_jax_network
     assert len(ref.scores) > 0 and len(ours.scores) == len(ref.scores)
     np.testing.assert_allclose(ours.scores, ref.scores, atol=1e-4)
     np.testing.assert_allclose(ours.boxes.size, ref.boxes.size, atol=1e-3)
+
+
+def test_the_bench_worker_times_the_chains_its_caller_hands_it():
+    """The worker is modality-free: it times whatever chains `chains_of(name)` builds (the entry
+    point passes each model's Modality.bench_chains) and records their stages and fields."""
+    import time
+
+    from dsfec_jax.deploy.bench import workers
+    from dsfec_jax.deploy.bench.__main__ import chains_of
+    from dsfec_jax.modalities.registry import modality_of
+
+    asked = []
+
+    def chains(name, runtimes, threads, workdir, repeats):
+        asked.append((name, tuple(runtimes), threads, repeats))
+        make = lambda _: time.sleep(1e-3) or [1.0, 2.0]  # noqa: E731  (a stage that takes time)
+        return {rt: ([("make", make), ("sum", sum)], {"weights": "none"}) for rt in runtimes}
+
+    records = workers.worker(["a", "b"], ["jax", "onnx"], 1, repeats=2, warmup=0, chains_of=lambda name: chains)
+    assert asked == [("a", ("jax", "onnx"), 1, 2), ("b", ("jax", "onnx"), 1, 2)]
+    assert [(r["model"], r["runtime"]) for r in records] == [("a", "jax"), ("a", "onnx"), ("b", "jax"), ("b", "onnx")]
+    assert all(set(r["stages_ms"]) == {"make", "sum"} and r["weights"] == "none" for r in records)
+    assert chains_of("yolov8n") is modality_of("yolov8n").bench_chains  # the entry point's lookup

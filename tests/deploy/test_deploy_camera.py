@@ -21,10 +21,11 @@ from conftest import random_variables
 from dsfec_jax import cli, zoo
 from dsfec_jax.data.camera.batches import eval_input
 from dsfec_jax.data.camera.sources import load_camera_images
-from dsfec_jax.deploy import OrtCameraPredictor
-from dsfec_jax.modalities.image import export as export_camera, quantize as quantize_camera
+from dsfec_jax.modalities.image.ort import OrtCameraPredictor
+from dsfec_jax.modalities.image.export import export_camera
+from dsfec_jax.modalities.image.quantize import quantize_camera
 from dsfec_jax.deploy.bench import timing
-from dsfec_jax.deploy.bench.model_setup import measured_batch_stats
+from dsfec_jax.modalities.image.bench import measured_batch_stats
 from dsfec_jax.modalities.image.ort import graph_input_hw
 from dsfec_jax.modalities.image.predict import CameraPredictor, decoding_network
 
@@ -162,22 +163,19 @@ def test_int8_is_close_to_float_with_the_decode_in_float(exports, frames, tmp_pa
 def test_the_bench_chains_run_and_agree(tmp_path, monkeypatch):
     """jax, onnx and onnx-int8 chains of one street image: the three stages each, the same
     detections from JAX and ONNX Runtime; the stand-in variables carry measured batch statistics."""
-    import importlib
-
-    from dsfec_jax.deploy.bench import stages, workers
+    from dsfec_jax.deploy.bench import stages
     from dsfec_jax.modalities.image import bench as stages_camera
 
-    setup = importlib.import_module("dsfec_jax.deploy.bench.model_setup")  # the package's name is a function
     # the initial weights without compiling init (~10 s); their batch statistics are still measured
-    monkeypatch.setattr(setup, "bench_variables", lambda det, name: (random_variables(det, 5), "random"))
+    monkeypatch.setattr(stages_camera, "bench_variables", lambda det, name: (random_variables(det, 5), "random"))
     monkeypatch.setattr(stages_camera, "CALIBRATION_IMAGES", 2)
     monkeypatch.setattr(stages, "JAX_BATCHES", (1,))
-    chains = workers.camera_chains("shuffle_yolov3", ["jax", "onnx", "onnx-int8"], 1, tmp_path, repeats=1,
+    chains = stages_camera.camera_chains("shuffle_yolov3", ["jax", "onnx", "onnx-int8"], 1, tmp_path, repeats=1,
                                    size=SIZE, overrides=TINY)
     assert set(chains) == {"jax", "onnx", "onnx-int8"}
     outputs = {}
     for rt, (steps, fields) in chains.items():
-        assert [s for s, _ in steps] == list(timing.CAMERA_STAGES)
+        assert [s for s, _ in steps] == list(stages_camera.STAGES)
         assert fields["weights"] == "random" and fields["input_hw"] == list(HW)
         x = None
         for _, fn in steps:
@@ -191,12 +189,13 @@ def test_the_bench_chains_run_and_agree(tmp_path, monkeypatch):
 
 
 def test_camera_train_batches_are_made_as_training_makes_them():
+    from dsfec_jax.modalities.registry import modality_of
     from dsfec_jax.profile import training
 
     settings = training.Settings(batch=2, repeats=1, warmup=0, distinct_batches=2, image_size=96)
-    assert training.model_overrides("yolov3_darknet53", settings) == {"num_classes": 5, "class_names": STREET}
-    training.check_models(["shuffle_yolov3", "yolov8n", "dsfec_s"], settings, None)
-    det, batches, windows = training.training_batches("shuffle_yolov3", {**TINY}, settings)
+    assert training.model_overrides("yolov3_darknet53", settings, modality_of("yolov3_darknet53")) == {"num_classes": 5, "class_names": STREET}
+    training.check_models(["shuffle_yolov3", "yolov8n", "dsfec_s"], settings, None, modality_of)
+    det, batches, windows = modality_of("shuffle_yolov3").train_bench_batches("shuffle_yolov3", {**TINY}, settings)
     assert det.config.classes == STREET and windows == 1 and len(batches) == 2
     b = batches[0]
     assert {k: v.shape for k, v in b["inputs"].items()} == {"image": (2, *HW, 3)}

@@ -10,6 +10,7 @@ from dsfec_jax.models.dsfec import paper
 from dsfec_jax.profile.counting import compile_network, xla_gflops
 from dsfec_jax.profile.__main__ import main as profile_main
 from dsfec_jax.profile.memory import paper_memory_mb
+from dsfec_jax.modalities.registry import modality_of
 from dsfec_jax.profile.records import profile, size_record
 from conftest import tiny
 
@@ -57,7 +58,7 @@ def test_layer_macs_by_hand_for_the_stem():
 
 def test_record_keys_and_per_stage_sums():
     det = tiny("dsfec_m")
-    rec = size_record(det)
+    rec = size_record(det, modality_of(det.config))
     # On a 32 x 32 grid XLA counts 2-5 % *less* than 2 x MAC: its cost analysis skips the taps that
     # fall on 'SAME' padding, a large share of a tiny map; the README's 2 % is for the full grid.
     assert -0.05 < rec["xla_vs_analytic"] < 0
@@ -82,7 +83,7 @@ def test_published_zoo_records_keep_xla_within_2_percent():
 
 
 def test_latency_records_per_stage():
-    recs = profile([tiny("dsfec_s")], timing=True, repeats=3, warmup=1)
+    recs = profile([tiny("dsfec_s")], timing=True, repeats=3, warmup=1, modality_of=modality_of)
     rec = recs[0]
     assert rec["latency_ms"] > 0 and rec["latency_p90_ms"] >= rec["latency_ms"]
     assert set(rec["latency_per_stage_ms"]) == {"pillar_net", "backbone", "neck_heads"}
@@ -125,3 +126,15 @@ def test_cli_json_and_readme(tmp_path, capsys):
 def test_paper_rows_report_relative_errors():
     rows = compare.table1_rows([{"model": "dsfec_s", "params": 330_000, "gflops": 4.45}])
     assert rows[0]["metric"] == "params" and abs(rows[0]["rel_err"] - 0.1) < 1e-9
+
+
+def test_the_readme_zoo_tables_are_the_stored_records(tmp_path):
+    """`--tables-only` rebuilds every modality's zoo table from its record file (no profiling): the
+    README's tables are exactly what the records give, and a changed table is put back."""
+    readme = Path(__file__).resolve().parents[2] / "README.md"
+    copy = tmp_path / "README.md"
+    copy.write_text(readme.read_text().replace("| dsfec_s |", "| dsfec_s (edited) |"))
+    assert profile_main(["--tables-only", "--readme", str(copy)]) == 0
+    assert copy.read_text() == readme.read_text()
+    with pytest.raises(SystemExit, match="--tables-only needs --readme"):
+        profile_main(["--tables-only"])

@@ -14,6 +14,7 @@ from dsfec_jax import zoo
 from dsfec_jax.data.rd.representations import RDRepresentation
 from dsfec_jax.profile import compare, counting, latency, op_breakdown, training, zoo_table
 from dsfec_jax.modalities.rd import profile as rd, train_bench as training_rd
+from dsfec_jax.modalities.registry import modality_of
 from dsfec_jax.profile.records import profile, size_record
 
 TINY_HW = (64, 32)
@@ -21,7 +22,7 @@ TINY_HW = (64, 32)
 
 @pytest.fixture(scope="module")
 def adapter_record():
-    return size_record(zoo.create("yolov8n_adapter"), xla=False)
+    return size_record(zoo.create("yolov8n_adapter"), modality_of("yolov8n_adapter"), xla=False)
 
 
 def test_rd_stages_are_the_networks_parts(adapter_record):
@@ -71,7 +72,7 @@ def test_profile_record_with_latency_stages_that_compose_to_the_network(monkeypa
     timed = []
     stage_functions = latency.stage_functions
     monkeypatch.setattr(latency, "stage_functions", lambda *a, **k: timed.append(stage_functions(*a, **k)) or timed[-1])
-    rec = profile([TinyMaps(zoo.config("yolov10n_adapter"))], timing=True, repeats=2, warmup=1)[0]
+    rec = profile([TinyMaps(zoo.config("yolov10n_adapter"))], timing=True, repeats=2, warmup=1, modality_of=modality_of)[0]
     assert list(rec["latency_per_stage_ms"]) == list(rd.LATENCY_STAGES)
     assert rec["latency_ms"] > 0 and rec["xla_gflops"] > 0 and rec["latency_setup"]["depthwise_impl"] is None
     whole, staged = timed[0]["total"](), timed[0]["head"]()
@@ -81,24 +82,25 @@ def test_profile_record_with_latency_stages_that_compose_to_the_network(monkeypa
 
 
 def test_zoo_table_puts_rd_records_in_their_own_table(adapter_record, tmp_path):
-    points = json.loads(zoo_table.RECORDS.read_text())
-    only_points = zoo_table.markdown(points)
+    points = json.loads(modality_of("dsfec_s").zoo_table.record.read_text())
+    only_points = zoo_table.markdown(points, modality_of)
     mixed_payload = {**points, "records": points["records"] + [adapter_record]}
     assert "| yolov8n_adapter |" not in only_points and "Range-Doppler" not in only_points
-    assert zoo_table.markdown(mixed_payload).startswith(only_points + "\n\n| model | mAP@50 |")
-    rd_table = zoo_table.markdown({**points, "records": [adapter_record]})
+    assert zoo_table.markdown(mixed_payload, modality_of).startswith(only_points + "\n\n| model | mAP@50 |")
+    rd_table = zoo_table.markdown({**points, "records": [adapter_record]}, modality_of)
     # the two mAP cells come from the shipped weights' manifest ('-' without weights)
     sizes = "| 3.248 M | 3.242 M | 0.649 | 0.126 / 0.326 / 0.079 / 0.119 | - | - |"
     assert re.search(r"\| yolov8n_adapter \| [-0-9.]+ \| [-0-9.]+ " + re.escape(sizes), rd_table), rd_table
+    (start, end), (rd_start, rd_end) = modality_of("dsfec_s").zoo_table.markers, modality_of("yolov8n").zoo_table.markers
     readme = tmp_path / "README.md"
-    readme.write_text(f"{zoo_table.START}\nold\n{zoo_table.END}\n")
+    readme.write_text(f"{start}\nold\n{end}\n")
     with pytest.raises(ValueError, match="zoo-rd-table"):  # never writes RD rows into the point table
-        zoo_table.update_readme(readme, mixed_payload)
-    readme.write_text(f"{zoo_table.START}\nold\n{zoo_table.END}\n{zoo_table.RD_START}\nold\n{zoo_table.RD_END}\n")
-    zoo_table.update_readme(readme, mixed_payload)
+        zoo_table.update_readme(readme, mixed_payload, modality_of)
+    readme.write_text(f"{start}\nold\n{end}\n{rd_start}\nold\n{rd_end}\n")
+    zoo_table.update_readme(readme, mixed_payload, modality_of)
     text = readme.read_text()
     assert "\nold\n" not in text and text.count("| yolov8n_adapter |") == 1
-    assert text.index("| dsfec_s |") < text.index(zoo_table.END) < text.index("| yolov8n_adapter |")
+    assert text.index("| dsfec_s |") < text.index(end) < text.index("| yolov8n_adapter |")
 
 
 # ---- training benchmark ---------------------------------------------------------------------------
@@ -108,7 +110,7 @@ SETTINGS = training.Settings(batch=2, repeats=1, warmup=0, distinct_batches=2, p
 
 def test_rd_train_batches_are_made_as_training_makes_them(monkeypatch):
     monkeypatch.setattr(training_rd, "REPRESENTATION", RDRepresentation(fit="resize", input_hw=TINY_HW))
-    det, batches, windows = training.training_batches("yolov8n_adapter", {}, SETTINGS)
+    det, batches, windows = modality_of("yolov8n_adapter").train_bench_batches("yolov8n_adapter", {}, SETTINGS)
     assert det.name == "yolov8n_adapter" and windows == 1 and len(batches) == SETTINGS.distinct_batches
     b = batches[0]
     assert {k: v.shape for k, v in b["inputs"].items()} == {"heat": (2, *TINY_HW, 3), "gray": (2, *TINY_HW, 1)}
@@ -119,12 +121,12 @@ def test_rd_train_batches_are_made_as_training_makes_them(monkeypatch):
 
 
 def test_point_settings_do_not_apply_to_rd_models():
-    assert training.model_overrides("yolov8n", SETTINGS) == {}
-    assert training.model_overrides("dsfec_s", SETTINGS) == {"max_pillars": SETTINGS.max_pillars}
-    training.check_models(["dsfec_s", "yolov8n", "yolov10n_adapter"], SETTINGS, None)
-    training.check_models(["yolov8n_adapter"], SETTINGS, {"fusion": 2})
+    assert training.model_overrides("yolov8n", SETTINGS, modality_of("yolov8n")) == {}
+    assert training.model_overrides("dsfec_s", SETTINGS, modality_of("dsfec_s")) == {"max_pillars": SETTINGS.max_pillars}
+    training.check_models(["dsfec_s", "yolov8n", "yolov10n_adapter"], SETTINGS, None, modality_of)
+    training.check_models(["yolov8n_adapter"], SETTINGS, {"fusion": 2}, modality_of)
     with pytest.raises(ValueError, match="max_pillars"):  # an RD config has no pillar slots to compare
-        training.check_models(["yolov8n"], SETTINGS, {"max_pillars": 64})
+        training.check_models(["yolov8n"], SETTINGS, {"max_pillars": 64}, modality_of)
     assert zoo.family_of("yolov8n").schedules[training.STEP_SCHEDULE] == "yolo_quick"
 
 
@@ -145,18 +147,18 @@ def fake_record(model: str, inputs: dict) -> dict:
 def test_bench_table_says_what_differs_for_rd_models():
     rd_rec = fake_record("yolov8n", {"heat": [8, 256, 64, 3], "gray": [8, 256, 64, 1]})
     content = training.payload("dsfec bench --train", [rd_rec], SETTINGS, None)
-    table = training.markdown(content)
+    table = training.markdown(content, modality_of=modality_of)
     assert "| yolov8n | default | 2 | - | 200.00 |" in table
     assert "Range-Doppler models (yolov8n): batch 2 whole 256 x 64 RD maps" in table
     assert "Record: `dsfec_jax/profile/records/train_bench.json`" in table
     # one model at two thread counts is named once; the record is the file --out wrote
     two = training.payload("x", [rd_rec, {**rd_rec, "threads": 1}], SETTINGS, None)
-    table = training.markdown(two, record="/tmp/elsewhere/rd.json")
+    table = training.markdown(two, record="/tmp/elsewhere/rd.json", modality_of=modality_of)
     assert "Range-Doppler models (yolov8n): batch" in table and "Record: `/tmp/elsewhere/rd.json`" in table
     in_repo = training.RECORD.parent / "train_bench_rd.json"
-    assert "Record: `dsfec_jax/profile/records/train_bench_rd.json`" in training.markdown(two, record=in_repo)
+    assert "Record: `dsfec_jax/profile/records/train_bench_rd.json`" in training.markdown(two, record=in_repo, modality_of=modality_of)
     point_rec = fake_record("dsfec_s", {"points": [8, 96, 8, 7]})
-    assert "Range-Doppler" not in training.markdown(training.payload("x", [point_rec], SETTINGS, None))
+    assert "Range-Doppler" not in training.markdown(training.payload("x", [point_rec], SETTINGS, None), modality_of=modality_of)
 
 
 @pytest.mark.parametrize("op_name, expected", [

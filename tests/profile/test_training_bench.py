@@ -12,6 +12,7 @@ import pytest
 
 from dsfec_jax import cli
 from dsfec_jax.core.grid import Grid
+from dsfec_jax.modalities.registry import modality_of
 from dsfec_jax.profile import op_breakdown, training
 
 # a 8 x 8-cell grid and the smallest DSFEC-S the validator accepts: the same layers, quick to compile
@@ -27,7 +28,7 @@ COMPARE = {"notes": "same network"}
 
 @pytest.fixture(scope="module")
 def record():
-    return training.measure("dsfec_s", SETTINGS, COMPARE, base=TINY)
+    return training.measure("dsfec_s", SETTINGS, COMPARE, base=TINY, modality=modality_of("dsfec_s"))
 
 
 def positive(value) -> bool:
@@ -88,19 +89,19 @@ def test_the_step_breakdown_adds_up(record):
 
 def test_markdown_and_readme(record, tmp_path):
     content = training.payload("dsfec bench --train", [record], SETTINGS, COMPARE)
-    table = training.markdown(content)
+    table = training.markdown(content, modality_of=modality_of)
     assert "| dsfec_s | default |" in table and "notes=same network" in table and "Op time per step" in table
     spread = record["configs"][0]["fwd_bwd_over_eval_by_repetition"]
     assert f"| {record['configs'][0]['fwd_bwd_over_eval']:.2f} ({spread['p10']:.2f}-{spread['p90']:.2f}) |" in table
     readme = tmp_path / "README.md"
     readme.write_text(f"intro\n{training.README_START}\nold\n{training.README_END}\nend\n")
-    training.update_readme(readme, content)
+    training.update_readme(readme, content, modality_of=modality_of)
     text = readme.read_text()
     assert "old" not in text and "| dsfec_s |" in text and text.endswith("end\n")
     assert "| phase | module |" in text and "| HLO op |" not in text  # the short form
     readme.write_text("no markers")
     with pytest.raises(ValueError, match="train-bench"):
-        training.update_readme(readme, content)
+        training.update_readme(readme, content, modality_of=modality_of)
 
 
 class Tiny(nn.Module):
@@ -176,10 +177,10 @@ def test_compare_parsing():
 
 def test_bad_compare_input_names_the_field(capsys):
     with pytest.raises(ValueError, match="depthwise_imp"):
-        training.check_models(["dsfec_s"], SETTINGS, {"depthwise_imp": "grouped"})
+        training.check_models(["dsfec_s"], SETTINGS, {"depthwise_imp": "grouped"}, modality_of)
     with pytest.raises(ValueError, match="depthwise_impl"):  # a known field with a value it cannot take
-        training.check_models(["dsfec_s"], SETTINGS, {"depthwise_impl": "fast"})
-    training.check_models(["dsfec_s", "radarnext_fpn"], SETTINGS, {"depthwise_impl": "grouped"})
+        training.check_models(["dsfec_s"], SETTINGS, {"depthwise_impl": "fast"}, modality_of)
+    training.check_models(["dsfec_s", "radarnext_fpn"], SETTINGS, {"depthwise_impl": "grouped"}, modality_of)
     with pytest.raises(SystemExit, match="depthwise_imp"):
         cli.main(["bench", "--train", "--models", "dsfec_s", "--compare", "depthwise_imp=grouped"])
     with pytest.raises(SystemExit, match="--compare need --train"):

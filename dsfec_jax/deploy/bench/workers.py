@@ -1,6 +1,7 @@
-"""One worker process per thread count, and `run`, which launches them and gathers their records;
-`point_chains` / `rd_chains` / `camera_chains` build each model's chains by the modality its family
-reads.
+"""One worker process per thread count, and `run`, which launches them and gathers their records.
+A worker times the chains each model's modality builds (`Modality.bench_chains`: runtime -> (chain,
+record fields)); its entry point (`python -m dsfec_jax.deploy.bench`, __main__.py) looks the
+modality up and passes `chains_of(model name) -> that verb` in.
 
 XLA has no thread-count flag and sizes its pool from the CPUs it may use when it starts, so each
 --threads value N runs in its own worker process (`python -m dsfec_jax.deploy.bench`) pinned to N
@@ -16,103 +17,25 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Callable
 
-import jax
 import numpy as np
 
 from ...core import threads as thread_control
-from .model_setup import camera_model_setup, model_setup, rd_model_setup
-from .stages import jax_stages, jax_throughput, onnx_graphs, ort_stages
-from ...modalities.image.bench import camera_pipeline
-from ...modalities.rd.bench import rd_jax_stages, rd_onnx_graph, rd_ort_stages
-from .timing import camera_chain, chain, rd_chain, time_chains
-
-POINT_CALIBRATION_FRAMES = 32  # synthetic train frames, seed 0
+from .timing import time_chains
 
 
-def point_chains(name: str, runtimes: list[str], threads: int, workdir: Path, repeats: int) -> dict:
-    """runtime -> (chain of a point model, record fields)."""
-    from ...data.points.pillarize import PillarSpec, select_columns
-    from ...data.points.sources import load_frames
-    from ...modalities.points.predict import decoded_network
-
-    det, variables, label, points, predictor = model_setup(name)
-    spec, out = PillarSpec.of(det.config), {}
-    for rt in runtimes:
-        if rt == "jax":
-            stages = jax_stages(det, variables, predictor)
-        else:
-            calib = [select_columns(f, det.config.point_features)
-                     for f in load_frames("synthetic", "train", POINT_CALIBRATION_FRAMES, seed=0)] if rt == "onnx-int8" else []
-            stages = ort_stages(onnx_graphs(det, variables, predictor, workdir, rt == "onnx-int8", calib), threads)
-        out[rt] = (chain(points, spec, stages, predictor), {"weights": label, "points": int(len(points))})
-    if "jax" in out:
-        out["jax"][1]["throughput_fps"] = jax_throughput(det, variables, jax.jit(decoded_network(det, 100)), repeats)
-    return out
-
-
-def rd_chains(name: str, runtimes: list[str], threads: int, workdir: Path, repeats: int) -> dict:
-    """runtime -> (chain of a range-Doppler model, record fields): the native map, padded as training
-    pads it (data/rd representations, fit 'pad'), in one fixed-size graph."""
-    from ...data.rd.representations import RDRepresentation, fitted_shape
-    from ...modalities.rd.predict import detecting_network
-
-    det, variables, label, sample = rd_model_setup(name)
-    representation = RDRepresentation()
-    input_hw = fitted_shape(sample.shape, representation)
-    out = {}
-    for rt in runtimes:
-        if rt == "jax":
-            stages = rd_jax_stages(det, variables, input_hw)
-        else:
-            stages = rd_ort_stages(rd_onnx_graph(det, variables, workdir, rt == "onnx-int8", input_hw), threads)
-        out[rt] = (rd_chain(sample, representation, det.config.input_names, stages),
-                   {"weights": label, "input_hw": list(input_hw)})
-    if "jax" in out:
-        out["jax"][1]["throughput_fps"] = jax_throughput(det, variables, jax.jit(detecting_network(det)), repeats)
-    return out
-
-
-CAMERA_SIZE = 416  # the long side camera images are letterboxed to (the paper's; street frames: 256 x 416)
-
-
-def camera_chains(name: str, runtimes: list[str], threads: int, workdir: Path, repeats: int,
-                  size: int = CAMERA_SIZE, overrides: dict | None = None) -> dict:
-    """runtime -> (chain of a camera model, record fields): one street test image letterboxed as
-    CameraPredictor letterboxes it at `size`, into one fixed-size graph for ONNX Runtime.
-    `overrides`: config fields (the tests' tiny networks)."""
-    from ...modalities.image.predict import decoding_network, letterbox_shape
-
-    det, variables, label, image = camera_model_setup(name, size, overrides)
-    input_hw = letterbox_shape(size, True, image.hw)  # CameraPredictor's rectangle: 256 x 416 at 416
-    out = {}
-    for rt in runtimes:
-        pipeline = camera_pipeline(det, variables, rt, size, workdir, threads, input_hw)
-        out[rt] = (camera_chain(image, pipeline), {"weights": label, "input_hw": list(input_hw)})
-    if "jax" in out:
-        network = decoding_network(det)
-        out["jax"][1]["throughput_fps"] = jax_throughput(det, variables, jax.jit(lambda v, x: network(v, x["image"])),
-                                                         repeats, hw=input_hw)
-    return out
-
-
-CHAINS = {"points": point_chains, "rd": rd_chains, "image": camera_chains}  # modality -> its chains
-
-
-def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, warmup: int) -> list[dict]:
-    """One process, one thread count: every (model, runtime) chain timed in one interleaved loop."""
-    from ... import zoo
+def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, warmup: int,
+           chains_of: Callable[[str], Callable[..., dict]]) -> list[dict]:
+    """One process, one thread count: every (model, runtime) chain timed in one interleaved loop.
+    `chains_of(name)` -> the model's `bench_chains(name, runtimes, threads, workdir, repeats)`."""
     from ...core.environment import cpu_model, xla_threads
     from ...core.provenance import versions
 
     chains, extra = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in models:
-            modality = zoo.family_of(name).modality
-            if modality not in CHAINS:
-                raise ValueError(f"bench: {name!r} reads {modality!r} inputs; the bench times {sorted(CHAINS)} models")
-            make = CHAINS[modality]
-            for rt, (steps, fields) in make(name, runtimes, threads, Path(tmp), repeats).items():
+            for rt, (steps, fields) in chains_of(name)(name, runtimes, threads, Path(tmp), repeats).items():
                 chains[(name, rt)], extra[(name, rt)] = steps, fields
         samples = time_chains(chains, repeats, warmup)
     # threads: the count asked for; xla_threads: XLA's pool as observed after the runs (the truth)
@@ -150,7 +73,8 @@ def run(models: list[str], runtimes: list[str], threads: list[int], repeats: int
     return records
 
 
-def main(argv=None) -> int:  # the worker entry point (__main__.py); users run `dsfec bench`
+def main(chains_of: Callable[[str], Callable[..., dict]], argv=None) -> int:
+    """The worker (__main__.py passes `chains_of`, see `worker`); users run `dsfec bench`."""
     import argparse
 
     p = argparse.ArgumentParser(prog="python -m dsfec_jax.deploy.bench")
@@ -162,6 +86,6 @@ def main(argv=None) -> int:  # the worker entry point (__main__.py); users run `
     p.add_argument("--records-out", required=True)
     a = p.parse_args(argv)
     thread_control.pin(a.threads)  # before the first jax computation: XLA sizes its pool from it
-    records = worker(a.models.split(","), a.runtimes.split(","), a.threads, a.repeats, a.warmup)
+    records = worker(a.models.split(","), a.runtimes.split(","), a.threads, a.repeats, a.warmup, chains_of)
     Path(a.records_out).write_text(json.dumps(records))
     return 0

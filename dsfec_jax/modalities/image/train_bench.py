@@ -19,6 +19,7 @@ import functools
 import jax
 
 from ... import zoo
+from ...profile.training import model_names
 
 
 def class_fields() -> dict:
@@ -44,3 +45,14 @@ def training_batches(name: str, overrides: dict, settings) -> tuple[zoo.Detector
                                MultiScale((settings.image_size,)))
     batches = [stream.batch(k) for k in range(settings.distinct_batches)]  # one epoch: every image once
     return det, [jax.device_put({"inputs": b["inputs"], "targets": b["targets"]}) for b in batches], 1
+
+
+def note(records: list[dict], settings: dict) -> str:
+    """What the train-bench table's footer says of its camera `records` ('' for none)."""
+    if not records:
+        return ""
+    shape = next(iter(records[0]["configs"][0]["input"].values()))
+    return (f" Camera models ({model_names(records)}): batch {settings['batch']} street train "
+            f"images letterboxed to {shape[1]} x {shape[2]} with darknet's augmentations and padded box targets as "
+            "train/fit_camera.py makes them (one input size, no multi-scale), the street benchmark's 5 classes; "
+            "windows and pillar slots do not apply; the step is the family's quick schedule's (AdamW).")

@@ -3,7 +3,8 @@ VoD protocols."""
 
 from __future__ import annotations
 
-from ..base import Commands, Modality, Protocol, ZooTable
+from ..base import Commands, Modality, Protocol
+from .zoo_table import TABLE as ZOO_TABLE
 
 
 def load_samples(family, source: str, split: str, count: int | None, seed: int):
@@ -17,17 +18,17 @@ def predictor(detector, variables, **options):
 
 
 def ort_predictor(export_dir, **options):
-    from ...deploy.ort import OrtPredictor
+    from .ort import OrtPredictor
     return OrtPredictor(export_dir, **options)
 
 
 def export(detector, variables, out_dir, **options):
-    from ...deploy.export import export as export_points
+    from .export import export as export_points
     return export_points(detector, variables, out_dir, **options)
 
 
 def quantize(export_dir, out_dir, samples, **options):
-    from ...deploy.quantize import quantize as quantize_points
+    from .quantize import quantize as quantize_points
     return quantize_points(export_dir, out_dir, samples, **options)
 
 
@@ -53,30 +54,37 @@ def _cli(verb):
 
 
 def bench_chains(name, runtimes, threads, workdir, repeats):
-    from ...deploy.bench.workers import point_chains
+    from .bench import point_chains
     return point_chains(name, runtimes, threads, workdir, repeats)
 
 
 def stage_name(path):
-    from ...profile.counting import stage_of
+    from .profile import stage_of
     return stage_of(path)
 
 
 def latency_stages(detector, variables, inputs):
-    raise NotImplementedError
+    from .profile import latency_stages as stages
+    return stages(detector, variables, inputs)
+
+
+def size_fields(variables):
+    return {}
 
 
 def train_bench_fields(name, settings):
-    return {"max_pillars": settings.max_pillars}
+    from .train_bench import fields
+    return fields(name, settings)
 
 
 def train_bench_batches(name, overrides, settings):
-    raise NotImplementedError
+    from .train_bench import training_batches
+    return training_batches(name, overrides, settings)
 
 
-def _zoo_table():
-    from ...profile import zoo_table
-    return ZooTable((zoo_table.START, zoo_table.END), zoo_table.RECORDS, zoo_table.point_rows, zoo_table.POINT_NOTE)
+def train_bench_note(records, settings):
+    from .train_bench import note
+    return note(records, settings)
 
 
 MODALITY = Modality(
@@ -86,6 +94,6 @@ MODALITY = Modality(
                       export=_cli("export_points"), quantize=_cli("quantize_points"), data_fields=lambda args, o: o,
                       refuse=lambda args, command: None),
     export=export, quantize=quantize, bench_chains=bench_chains, stage_name=stage_name,
-    latency_stages=latency_stages, train_bench_fields=train_bench_fields, train_bench_batches=train_bench_batches,
-    zoo_table=None,
+    latency_stages=latency_stages, size_fields=size_fields, train_bench_fields=train_bench_fields,
+    train_bench_batches=train_bench_batches, train_bench_note=train_bench_note, zoo_table=ZOO_TABLE,
 )

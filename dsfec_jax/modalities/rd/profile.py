@@ -38,10 +38,6 @@ FLOPS_CONVENTION = ("2 x MACs of conv layers at batch 1 on the 256 x 64 maps (ul
 ULTRALYTICS_SETTING = {"hw": (640, 640), "classes": 80}
 
 
-def is_rd(detector) -> bool:
-    return zoo.family_of(detector.config).modality == "rd"
-
-
 def folded_params(tree) -> int:
     """Parameters of a 'params' tree after ultralytics' `fuse()` (see the module docstring)."""
     if not isinstance(tree, dict):
@@ -63,7 +59,7 @@ def size_fields(variables: dict) -> dict:
             "gflops_convention": FLOPS_CONVENTION}
 
 
-def stage_functions(detector, variables, inputs) -> dict:
+def latency_stages(detector, variables, inputs) -> dict:
     """Jitted stage callables (not blocking; latency.py wraps them): features (backbone with the
     Adapter's exchanges), neck, head, each on the previous stage's output."""
     feats_fn = jax.jit(lambda v, x: detector.apply_method(v, "features", x))
@@ -83,4 +79,4 @@ def ultralytics_gflops(name: str, hw: tuple[int, int] = ULTRALYTICS_SETTING["hw"
     conv MACs x 2; the unfused summary in cfg/models/v8/yolov8.yaml (8.9) adds thop's BN ops."""
     cfg = zoo.config(name)
     cfg = dataclasses.replace(cfg, classes=tuple(f"class{i}" for i in range(classes)))
-    return counting.count_gflops(zoo.Detector(cfg), cfg.dummy_inputs(1, hw=hw))
+    return counting.count_gflops(zoo.Detector(cfg), cfg.dummy_inputs(1, hw=hw), counting.part_of)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from ..base import Commands, Modality, Protocol, ZooTable
+from ..base import Commands, Modality, Protocol
+from .zoo_table import TABLE as ZOO_TABLE
 
 
 def load_samples(family, source: str, split: str, count: int | None, seed: int):
@@ -52,7 +53,7 @@ def _cli(verb):
 
 
 def bench_chains(name, runtimes, threads, workdir, repeats):
-    from ...deploy.bench.workers import rd_chains
+    from .bench import rd_chains
     return rd_chains(name, runtimes, threads, workdir, repeats)
 
 
@@ -62,7 +63,13 @@ def stage_name(path):
 
 
 def latency_stages(detector, variables, inputs):
-    raise NotImplementedError
+    from .profile import latency_stages as stages
+    return stages(detector, variables, inputs)
+
+
+def size_fields(variables):
+    from .profile import size_fields as fields
+    return fields(variables)
 
 
 def train_bench_fields(name, settings):
@@ -70,12 +77,13 @@ def train_bench_fields(name, settings):
 
 
 def train_bench_batches(name, overrides, settings):
-    raise NotImplementedError
+    from .train_bench import training_batches
+    return training_batches(name, overrides, settings)
 
 
-def _zoo_table():
-    from ...profile import zoo_table
-    return ZooTable((zoo_table.START, zoo_table.END), zoo_table.RECORDS, zoo_table.point_rows, zoo_table.POINT_NOTE)
+def train_bench_note(records, settings):
+    from .train_bench import note
+    return note(records, settings)
 
 
 MODALITY = Modality(
@@ -85,6 +93,6 @@ MODALITY = Modality(
                       export=_cli("export"), quantize=_cli("quantize"), data_fields=lambda args, o: o,
                       refuse=lambda args, command: None),
     export=export, quantize=quantize, bench_chains=bench_chains, stage_name=stage_name,
-    latency_stages=latency_stages, train_bench_fields=train_bench_fields, train_bench_batches=train_bench_batches,
-    zoo_table=None,
+    latency_stages=latency_stages, size_fields=size_fields, train_bench_fields=train_bench_fields,
+    train_bench_batches=train_bench_batches, train_bench_note=train_bench_note, zoo_table=ZOO_TABLE,
 )

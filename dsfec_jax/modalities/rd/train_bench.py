@@ -13,6 +13,7 @@ from __future__ import annotations
 import jax
 
 from ... import zoo
+from ...profile.training import model_names
 from ...data.rd.representations import RDRepresentation
 
 # train/fit_rd.py's default: the maps as they are (fit='pad'; 256 x 64 is a multiple of the strides)
@@ -32,3 +33,14 @@ def training_batches(name: str, overrides: dict, settings) -> tuple[zoo.Detector
                            det.config.classes)
     batches = [stream.batch(k) for k in range(settings.distinct_batches)]  # one epoch: every sample once
     return det, [jax.device_put({"inputs": b["inputs"], "targets": b["targets"]}) for b in batches], 1
+
+
+def note(records: list[dict], settings: dict) -> str:
+    """What the train-bench table's footer says of its range-Doppler `records` ('' for none)."""
+    if not records:
+        return ""
+    shape = next(iter(records[0]["configs"][0]["input"].values()))
+    return (f" Range-Doppler models ({model_names(records)}): batch {settings['batch']} whole "
+            f"{shape[1]} x {shape[2]} RD maps (heat and gray) of the synthetic RD benchmark, augmented and with "
+            "padded box targets as train/fit_rd.py makes them; windows and pillar slots do not apply; the step is the "
+            "family's quick schedule's (ultralytics' SGD summing gradients to a nominal batch of 64).")
