@@ -138,3 +138,96 @@ def test_the_family_branch_finder_can_fail():
               "from dsfec_jax.models.dsfec.net import HEAD_NAMES\nok = zoo.family_of(cfg).name != 'dsfec'\n"
               "fine = zoo.family_of(cfg).metric.name")
     assert len(family_branches(source)) == 4
+
+
+# The import circles other helpers of issue 50 remove (zoo.py stops importing the predictors; the
+# profiler stops reaching into the RD modality). Temporary: the lead deletes this at the merge,
+# and the test below then holds every circle to zero.
+KNOWN_CIRCLES_OWNED_BY_OTHERS = (
+    frozenset({"dsfec_jax.zoo", "dsfec_jax.modalities.points.predict", "dsfec_jax.modalities.rd.predict",
+               "dsfec_jax.modalities.image.predict"}),
+    frozenset({"dsfec_jax.profile", "dsfec_jax.profile.latency", "dsfec_jax.profile.records",
+               "dsfec_jax.modalities.rd.profile"}),
+)
+GRAPH_ROOTS = ("dsfec_jax", "search", "experiments")
+
+
+def module_name(path: Path, root: Path) -> str:
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imported_modules(path: Path, known: set[str], root: Path) -> set[str]:
+    """The project modules `path` imports anywhere in it (at the top or inside a function: a lazy
+    import still makes the two modules depend on each other), absolute or relative, each resolved
+    to the longest module name in `known`."""
+    name = module_name(path, root).split(".")
+    package = name if path.name == "__init__.py" else name[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package[: len(package) - node.level + 1] + ([node.module] if node.module else []))
+            targets = [base] + [f"{base}.{a.name}" for a in node.names]  # `from pkg import submodule`
+        else:
+            continue
+        for target in targets:
+            parts = target.split(".")
+            while parts and ".".join(parts) not in known:
+                parts.pop()
+            if parts:
+                found.add(".".join(parts))
+    return found
+
+
+def import_graph(root: Path, tops=GRAPH_ROOTS) -> dict[str, set[str]]:
+    """module -> the project modules it imports. A submodule's import of a package it sits in is
+    no edge: Python runs that package's __init__ before the submodule anyway."""
+    paths = [p for top in tops for p in sorted((root / top).rglob("*.py"))]
+    known = {module_name(p, root): p for p in paths}
+    return {name: {m for m in imported_modules(p, set(known), root) - {name}
+                   if not (known[m].name == "__init__.py" and name.startswith(m + "."))}
+            for name, p in known.items()}
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[frozenset[str]]:
+    """The graph's strongly connected parts of more than one module: modules that import each
+    other, directly or through others."""
+    reach = {}
+    for start in graph:
+        seen, todo = set(), [start]
+        while todo:
+            for target in graph.get(todo.pop(), ()):
+                if target not in seen:
+                    seen.add(target)
+                    todo.append(target)
+        reach[start] = seen
+    circles = {frozenset({start} | {m for m in reach[start] if start in reach.get(m, ())}) for start in graph}
+    return sorted((c for c in circles if len(c) > 1), key=sorted)
+
+
+def test_no_module_imports_itself_through_others():
+    """dsfec_jax, search and experiments have no import circle, lazy imports included: a circle
+    makes two modules one (neither can change or load alone), and a lazy import only hides it."""
+    circles = [sorted(c) for c in import_circles(import_graph(PACKAGE.parent)) if c not in KNOWN_CIRCLES_OWNED_BY_OTHERS]
+    assert not circles
+
+
+def test_the_circle_finder_can_fail(tmp_path):
+    """A tiny package whose config builds its net lazily while the net imports the config (the
+    circle models/camera had), one relative and one absolute, plus an innocent bystander."""
+    pkg = tmp_path / "toy"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("from . import config\n")  # a package importing its child: no circle
+    (pkg / "config.py").write_text("def build():\n    from .net import Net\n    return Net()\n")
+    (pkg / "net.py").write_text("import toy.config\nfrom toy.layout import STAGES\nclass Net:\n    pass\n")
+    (pkg / "layout.py").write_text("STAGES = 5\n")
+    graph = import_graph(tmp_path, ("toy",))
+    assert graph["toy.net"] == {"toy.config", "toy.layout"} and graph["toy.config"] == {"toy.net"}
+    assert import_circles(graph) == [frozenset({"toy.config", "toy.net"})]
+    (pkg / "net.py").write_text("from .layout import STAGES\nclass Net:\n    pass\n")  # the fix: a leaf
+    assert import_circles(import_graph(tmp_path, ("toy",))) == []
+

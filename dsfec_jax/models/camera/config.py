@@ -47,17 +47,16 @@ import dataclasses
 
 import numpy as np
 
+from .layout import INPUT, STAGES, STRIDES
+
 # PASCAL VOC's 20 classes in the order of darknet's data/voc.names (and py-faster-rcnn); models/ may
 # not import data/, so the tuple lives here (data/camera/voc.py names the same classes).
 VOC_CLASSES = ("aeroplane", "bicycle", "bird", "boat", "bottle", "bus", "car", "cat", "chair", "cow",
                "diningtable", "dog", "horse", "motorbike", "person", "pottedplant", "sheep", "sofa",
                "train", "tvmonitor")
-STRIDES = (8, 16, 32)
 BACKBONES = ("shuffle", "darknet53")
 FIRST_REPEATS = ("stem", "unit")
 FPN_MERGES = ("concat", "add")
-INPUT = "image"  # the one input: (B, H, W, 3) float32 in [0, 1], H and W multiples of 32
-STAGES = 5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -124,7 +123,7 @@ class CameraConfig:
         return (self.deep_kernel, self.deep_act) if self.deep_heads[level] else (self.kernel, self.act)
 
     def build(self):
-        from .net import CameraNet  # net imports this module
+        from .net import CameraNet  # here: the net's modules load only when a network is built
 
         return CameraNet(self)
 
