@@ -231,3 +231,24 @@ def test_the_circle_finder_can_fail(tmp_path):
     (pkg / "net.py").write_text("from .layout import STAGES\nclass Net:\n    pass\n")  # the fix: a leaf
     assert import_circles(import_graph(tmp_path, ("toy",))) == []
 
+
+def private_jax_imports(source: str) -> list[str]:
+    """Imports of JAX's private modules (`jax._src...`): they change without notice between releases."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+            [f"{node.module}.{a.name}" for a in node.names] if isinstance(node, ast.ImportFrom) and node.module else [])
+        found += [f"line {node.lineno}: {n}" for n in names if n == "jax._src" or n.startswith("jax._src.")]
+    return found
+
+
+def test_nothing_imports_private_jax():
+    bad = {str(p.relative_to(PACKAGE.parent)): private_jax_imports(p.read_text())
+           for top in GRAPH_ROOTS for p in sorted((PACKAGE.parent / top).rglob("*.py"))}
+    assert not {k: v for k, v in bad.items() if v}
+
+
+def test_the_private_jax_finder_can_fail():
+    source = ("from jax._src import xla_bridge\nimport jax._src.lib\nfrom jax import _src\n"
+              "from jax.profiler import ProfileData\nimport jax\n")
+    assert len(private_jax_imports(source)) == 3

@@ -47,6 +47,7 @@ import dataclasses
 
 import numpy as np
 
+from ...layers.kernels import KERNELS
 from .layout import INPUT, STAGES, STRIDES
 
 # PASCAL VOC's 20 classes in the order of darknet's data/voc.names (and py-faster-rcnn); models/ may
@@ -87,7 +88,7 @@ class CameraConfig:
     split: str = "chunk"  # 'chunk' (torchvision) | 'even_odd' (megvii)
     prior_bias: bool = True  # output biases: ultralytics' priors (True) or darknet's zeros
     depthwise_impl: str = "shifted"  # "shifted" (fast jitted CPU) | "grouped" (ONNX export)
-    kernels: str = "fast"  # "fast" (CPU training formulations) | "plain" (textbook ones; layers/conv.py)
+    kernels: str = "auto"  # "auto" (the CPU training formulations on the CPU) | "fast" | "plain" (layers/kernels.py)
     notes: str = ""
 
     def __post_init__(self):
@@ -152,7 +153,7 @@ def validate(cfg: CameraConfig) -> None:
          f"{len(STRIDES)} widths, ordered by stride {STRIDES}")
     need(cfg.fpn_merge in FPN_MERGES, "fpn_merge", f"one of {FPN_MERGES}")
     need(cfg.depthwise_impl in ("shifted", "grouped"), "depthwise_impl", "'shifted' or 'grouped'")
-    need(cfg.kernels in ("fast", "plain"), "kernels", "'fast' or 'plain'")
+    need(cfg.kernels in KERNELS, "kernels", " or ".join(map(repr, KERNELS)))
     if cfg.backbone != "shuffle":
         return
     need(cfg.first_repeat in FIRST_REPEATS, "first_repeat", f"one of {FIRST_REPEATS}")
