@@ -9,12 +9,12 @@ import traceback
 from pathlib import Path
 
 from dsfec_jax import zoo
-from dsfec_jax.data.points.sources import load_frames
 from dsfec_jax.core.environment import environment
 from dsfec_jax.modalities.registry import modality_of
 from dsfec_jax.profile.records import profile
 from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.modalities.points.fit import fit
+from dsfec_jax.modalities.registry import modality_of
 
 from . import significance
 from .inherit import describe, initial_variables, source_weights
@@ -118,12 +118,10 @@ def measured(scores: dict, tables: dict, costs: dict) -> dict:
     return out
 
 
-def load_data(family, data: str, split: str, count: int):
-    """The frames (point families) or RD samples (range-Doppler ones) a trial trains or validates on."""
-    if family.modality == "rd":
-        from dsfec_jax.data.rd.sources import load_rd_samples
-        return load_rd_samples(data, split, count, seed=0)
-    return load_frames(data, split, count, seed=0, features=family.points.input_columns)
+def load_data(base: str, data: str, split: str, count: int):
+    """The samples a trial of model `base` trains or validates on, as its modality loads them
+    (point frames, RD samples, camera images)."""
+    return modality_of(base).load_samples(zoo.family_of(base), data, split, count, 0)
 
 
 def _fit_trial(trial: dict, trial_dir: Path) -> dict:
@@ -131,7 +129,7 @@ def _fit_trial(trial: dict, trial_dir: Path) -> dict:
     recipe = get_recipe(trial["recipe"], trial["base"])
     family = zoo.family_of(trial["base"])
     overrides = {**trial["overrides"], **recipe.model_overrides()}
-    frames, val = (load_data(family, trial["data"], split, n) for split, n in
+    frames, val = (load_data(trial["base"], trial["data"], split, n) for split, n in
                    (("train", recipe.train_frames), ("val", recipe.val_frames)))
     return fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
                window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,

@@ -140,7 +140,8 @@ def test_the_family_branch_finder_can_fail():
     assert len(family_branches(source)) == 4
 
 
-MODALITY_FREE = ("train", "deploy", "profile")  # rooms of machinery that take a Modality record from their caller
+# rooms of machinery that take a Modality record from their caller, and the rooms below modalities/
+MODALITY_FREE = ("train", "deploy", "profile", "models", "data", "metrics")
 
 
 def modality_importers(room: str) -> list[str]:
@@ -166,3 +167,217 @@ def test_the_modality_import_finder_can_fail(tmp_path, monkeypatch):
     (room / "__main__.py").write_text("from ..modalities.registry import modality_of\n")
     monkeypatch.setattr(__import__(__name__), "PACKAGE", tmp_path / "dsfec_jax")
     assert modality_importers("profile") == ["profile/latency.py"]
+
+
+# The import circles other helpers of issue 50 remove (zoo.py stops importing the predictors; the
+# profiler stops reaching into the RD modality). Temporary: the lead deletes this at the merge,
+# and the test below then holds every circle to zero.
+KNOWN_CIRCLES_OWNED_BY_OTHERS = (
+    frozenset({"dsfec_jax.zoo", "dsfec_jax.modalities.points.predict", "dsfec_jax.modalities.rd.predict",
+               "dsfec_jax.modalities.image.predict"}),
+    frozenset({"dsfec_jax.profile", "dsfec_jax.profile.latency", "dsfec_jax.profile.records",
+               "dsfec_jax.modalities.rd.profile"}),
+)
+GRAPH_ROOTS = ("dsfec_jax", "search", "experiments")
+
+
+def module_name(path: Path, root: Path) -> str:
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imported_modules(path: Path, known: set[str], root: Path) -> set[str]:
+    """The project modules `path` imports anywhere in it (at the top or inside a function: a lazy
+    import still makes the two modules depend on each other), absolute or relative, each resolved
+    to the longest module name in `known`."""
+    name = module_name(path, root).split(".")
+    package = name if path.name == "__init__.py" else name[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package[: len(package) - node.level + 1] + ([node.module] if node.module else []))
+            targets = [base] + [f"{base}.{a.name}" for a in node.names]  # `from pkg import submodule`
+        else:
+            continue
+        for target in targets:
+            parts = target.split(".")
+            while parts and ".".join(parts) not in known:
+                parts.pop()
+            if parts:
+                found.add(".".join(parts))
+    return found
+
+
+def import_graph(root: Path, tops=GRAPH_ROOTS) -> dict[str, set[str]]:
+    """module -> the project modules it imports. A submodule's import of a package it sits in is
+    no edge: Python runs that package's __init__ before the submodule anyway."""
+    paths = [p for top in tops for p in sorted((root / top).rglob("*.py"))]
+    known = {module_name(p, root): p for p in paths}
+    return {name: {m for m in imported_modules(p, set(known), root) - {name}
+                   if not (known[m].name == "__init__.py" and name.startswith(m + "."))}
+            for name, p in known.items()}
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[frozenset[str]]:
+    """The graph's strongly connected parts of more than one module: modules that import each
+    other, directly or through others."""
+    reach = {}
+    for start in graph:
+        seen, todo = set(), [start]
+        while todo:
+            for target in graph.get(todo.pop(), ()):
+                if target not in seen:
+                    seen.add(target)
+                    todo.append(target)
+        reach[start] = seen
+    circles = {frozenset({start} | {m for m in reach[start] if start in reach.get(m, ())}) for start in graph}
+    return sorted((c for c in circles if len(c) > 1), key=sorted)
+
+
+def test_no_module_imports_itself_through_others():
+    """dsfec_jax, search and experiments have no import circle, lazy imports included: a circle
+    makes two modules one (neither can change or load alone), and a lazy import only hides it."""
+    circles = [sorted(c) for c in import_circles(import_graph(PACKAGE.parent)) if c not in KNOWN_CIRCLES_OWNED_BY_OTHERS]
+    assert not circles
+
+
+def test_the_circle_finder_can_fail(tmp_path):
+    """A tiny package whose config builds its net lazily while the net imports the config (the
+    circle models/camera had), one relative and one absolute, plus an innocent bystander."""
+    pkg = tmp_path / "toy"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("from . import config\n")  # a package importing its child: no circle
+    (pkg / "config.py").write_text("def build():\n    from .net import Net\n    return Net()\n")
+    (pkg / "net.py").write_text("import toy.config\nfrom toy.layout import STAGES\nclass Net:\n    pass\n")
+    (pkg / "layout.py").write_text("STAGES = 5\n")
+    graph = import_graph(tmp_path, ("toy",))
+    assert graph["toy.net"] == {"toy.config", "toy.layout"} and graph["toy.config"] == {"toy.net"}
+    assert import_circles(graph) == [frozenset({"toy.config", "toy.net"})]
+    (pkg / "net.py").write_text("from .layout import STAGES\nclass Net:\n    pass\n")  # the fix: a leaf
+    assert import_circles(import_graph(tmp_path, ("toy",))) == []
+
+
+def private_jax_imports(source: str) -> list[str]:
+    """Imports of JAX's private modules (`jax._src...`): they change without notice between releases."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+            [f"{node.module}.{a.name}" for a in node.names] if isinstance(node, ast.ImportFrom) and node.module else [])
+        found += [f"line {node.lineno}: {n}" for n in names if n == "jax._src" or n.startswith("jax._src.")]
+    return found
+
+
+def test_nothing_imports_private_jax():
+    bad = {str(p.relative_to(PACKAGE.parent)): private_jax_imports(p.read_text())
+           for top in GRAPH_ROOTS for p in sorted((PACKAGE.parent / top).rglob("*.py"))}
+    assert not {k: v for k, v in bad.items() if v}
+
+
+def test_the_private_jax_finder_can_fail():
+    source = ("from jax._src import xla_bridge\nimport jax._src.lib\nfrom jax import _src\n"
+              "from jax.profiler import ProfileData\nimport jax\n")
+    assert len(private_jax_imports(source)) == 3
+
+
+# ---- floors: imports flow downward only (docs/layout.md) ----
+
+# the floor of each room of dsfec_jax: a module may import rooms on its own floor or below
+FLOORS = {
+    "core": 0, "argtypes": 0,
+    "layers": 1, "boxes": 1, "geo": 1,
+    "models": 2, "data": 2, "metrics": 2,
+    "zoo": 3,
+    "train": 4, "profile": 4, "deploy": 4,
+    "modalities": 5,
+    "api": 6, "edge": 6, "service": 6,
+    "cli_edge": 7, "cli": 8,
+    "__main__": 9,
+}
+MODALITY_NAMES = ("points", "rd", "image")
+# the only places that may say which modality they hold
+MODALITY_HOMES = ("dsfec_jax/modalities/", "dsfec_jax/models/family.py")
+
+
+def room_of(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__main__"
+
+
+def imports_back_up(graph: dict[str, set[str]]) -> list[str]:
+    """Imports from a room into a room on a higher floor (entry points' __main__ modules excepted:
+    they are the command layer of their room)."""
+    bad = []
+    for module, targets in graph.items():
+        if not module.startswith("dsfec_jax.") or module.endswith("__main__"):
+            continue
+        floor = FLOORS.get(room_of(module))
+        for target in targets:
+            if target.startswith("dsfec_jax.") and FLOORS.get(room_of(target), 99) > floor:
+                bad.append(f"{module} -> {target}")
+    return sorted(bad)
+
+
+def test_every_room_has_a_floor():
+    rooms = {room_of(m) for m in import_graph(PACKAGE.parent) if m.startswith("dsfec_jax.")}
+    assert not rooms - set(FLOORS), f"rooms without a floor in FLOORS: {sorted(rooms - set(FLOORS))}"
+
+
+def test_imports_never_climb_back_up():
+    assert not imports_back_up(import_graph(PACKAGE.parent))
+
+
+def test_the_climb_finder_can_fail():
+    graph = {"dsfec_jax.train.loop": {"dsfec_jax.modalities.points.fit", "dsfec_jax.core.atomic"},
+             "dsfec_jax.modalities.points.fit": {"dsfec_jax.train.loop"},
+             "dsfec_jax.profile.__main__": {"dsfec_jax.modalities.registry"}}
+    assert imports_back_up(graph) == ["dsfec_jax.train.loop -> dsfec_jax.modalities.points.fit"]
+
+
+def modality_branches(source: str) -> list[str]:
+    """Places that ask which modality they hold instead of asking its record: a comparison of
+    anything with a modality's name ('points', 'rd', 'image', or a collection holding one), and a
+    comparison of a `.modality` attribute with anything but None."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.Compare):
+            continue
+        sides = [node.left, *node.comparators]
+        named = any(isinstance(s, ast.Constant) and s.value in MODALITY_NAMES or isinstance(s, (ast.Tuple, ast.List, ast.Set))
+                    and any(isinstance(e, ast.Constant) and e.value in MODALITY_NAMES for e in s.elts) for s in sides)
+        attribute = any(isinstance(s, ast.Attribute) and s.attr == "modality" for s in sides) and not any(
+            isinstance(s, ast.Constant) and s.value is None for s in sides)
+        if named or attribute:
+            found.append(f"line {node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+def test_only_modalities_know_their_names():
+    bad = {}
+    for top in ("dsfec_jax", "search", "experiments"):
+        for path in sorted((PACKAGE.parent / top).rglob("*.py")):
+            rel = path.relative_to(PACKAGE.parent).as_posix()
+            if not rel.startswith(MODALITY_HOMES):
+                found = modality_branches(path.read_text())
+                if found:
+                    bad[rel] = found
+    assert not bad
+
+
+def test_the_modality_branch_finder_can_fail():
+    source = ("if family.modality == 'rd':\n    pass\nx = zoo.family_of(c).modality != wanted\n"
+              "y = kind in ('points', 'image')\nok = modality_of(cfg).predictor\nfine = m.modality is None\n"
+              "also = found != expected\n")
+    assert len(modality_branches(source)) == 3
+
+
+def test_modality_files_live_in_their_rooms():
+    """A `*_rd.py` or `*_camera.py` belongs in data/, models/ or modalities/ (a modality's part
+    elsewhere is a branch that moved into a file name)."""
+    allowed = {"data", "models", "modalities"}
+    bad = [p.relative_to(PACKAGE.parent).as_posix() for top in ("dsfec_jax",) for p in (PACKAGE.parent / top).rglob("*.py")
+           if p.stem.endswith(("_rd", "_camera")) and p.relative_to(PACKAGE).parts[0] not in allowed]
+    assert not bad

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from .kernels import Kernels, check_kernels
+from .kernels import Kernels, hand_written
 
 
 def _reduction_axes(x) -> tuple[int, ...]:
@@ -85,7 +85,7 @@ class BatchNorm(nn.Module):
     use_running_average: bool
     momentum: float = 0.99
     epsilon: float = 1e-5
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x, mask=None):
@@ -96,7 +96,7 @@ class BatchNorm(nn.Module):
         bias = self.param("bias", nn.initializers.zeros, features, jnp.float32)
         if self.use_running_average:
             return normalize(x, ra_mean.value, ra_var.value, scale, bias, self.epsilon)
-        if mask is None and check_kernels(self.kernels) == "fast":
+        if mask is None and hand_written(self.kernels):
             y, mean, var = fast_batch_norm(x, scale, bias, self.epsilon)
         else:
             where = None if mask is None else jnp.asarray(mask, bool)

@@ -15,7 +15,7 @@ class ConvBNAct(nn.Module):
     kernel: int = 3
     stride: int = 1
     act: str = "relu"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x, train: bool = False):
@@ -30,7 +30,7 @@ class DSConv(nn.Module):
     stride: int = 1
     act: str = "leaky_relu"
     depthwise_impl: DepthwiseImpl = "shifted"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x, train: bool = False):
@@ -48,7 +48,7 @@ class ResidualBottleneck(nn.Module):
     stride: int = 1
     act: str = "relu"
     expansion: int = 4
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x, train: bool = False):

@@ -18,7 +18,7 @@ from jax import lax
 
 from . import depthwise_grad_cpu, winograd
 from .batch_norm import BatchNorm
-from .kernels import KERNELS, Kernels, check_kernels  # noqa: F401  (re-exported)
+from .kernels import KERNELS, Kernels, check_kernels, hand_written  # noqa: F401  (re-exported)
 
 DIMS = ("NHWC", "HWIO", "NHWC")
 DepthwiseImpl = Literal["shifted", "grouped"]
@@ -40,13 +40,13 @@ class Conv(nn.Module):
     stride: int = 1
     use_bias: bool = False
     bias_init: nn.initializers.Initializer = nn.initializers.zeros
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x_BxHxWxC):
         k, cin = self.kernel, x_BxHxWxC.shape[-1]
         w = self.param("kernel", kernel_init, (k, k, cin, self.features))
-        fast = check_kernels(self.kernels) == "fast"
+        fast = hand_written(self.kernels)
         if k == 1 and fast:
             # a 1x1 conv is a matmul: XLA's CPU dot beats its conv, forward and weight gradient
             y = pointwise_conv(x_BxHxWxC[:, :: self.stride, :: self.stride], w[0, 0])
@@ -194,7 +194,7 @@ class DepthwiseConv(nn.Module):
     kernel: int = 3
     stride: int = 1
     impl: DepthwiseImpl = "shifted"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x_BxHxWxC):
@@ -206,7 +206,7 @@ class DepthwiseConv(nn.Module):
                 dimension_numbers=DIMS, feature_group_count=c,
             )
         if self.impl == "shifted":
-            fast = check_kernels(self.kernels) == "fast"
+            fast = hand_written(self.kernels)
             return (fast_shifted_depthwise if fast else shifted_depthwise)(x_BxHxWxC, w[:, :, 0, :], self.stride)
         raise ValueError(f"DepthwiseConv.impl={self.impl!r}; valid: 'shifted', 'grouped'")
 
@@ -326,13 +326,13 @@ class ConvTranspose(nn.Module):
     kernel: int = 3
     stride: int = 2
     use_bias: bool = True
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x_BxHxWxC):
         cin = x_BxHxWxC.shape[-1]
         w = self.param("kernel", kernel_init, (self.kernel, self.kernel, cin, self.features))
-        if check_kernels(self.kernels) == "fast":
+        if hand_written(self.kernels):
             y = subpixel_conv_transpose(x_BxHxWxC, w, self.stride,
                                         fast_grad=min(cin, self.features) >= FAST_CONV_MIN_CHANNELS)
         else:
@@ -396,12 +396,12 @@ class PointLinear(nn.Module):
 
     features: int
     use_bias: bool = True
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x):
         w = self.param("kernel", nn.initializers.lecun_normal(), (x.shape[-1], self.features))
-        y = (pointwise_conv if check_kernels(self.kernels) == "fast" else jnp.dot)(x, w)
+        y = (pointwise_conv if hand_written(self.kernels) else jnp.dot)(x, w)
         if self.use_bias:
             y = y + self.param("bias", nn.initializers.zeros, (self.features,))
         return y
@@ -415,5 +415,5 @@ BN_MOMENTUM = 0.99
 BN_EPS = 1e-3
 
 
-def batch_norm(train: bool, name: str | None = None, kernels: Kernels = "fast") -> BatchNorm:
+def batch_norm(train: bool, name: str | None = None, kernels: Kernels = "auto") -> BatchNorm:
     return BatchNorm(use_running_average=not train, momentum=BN_MOMENTUM, epsilon=BN_EPS, kernels=kernels, name=name)

@@ -25,7 +25,7 @@ class DarknetResidual(nn.Module):
 
     features: int
     act: str = "leaky_relu"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x, train: bool = False):
@@ -42,7 +42,7 @@ class DarknetStage(nn.Module):
     features: int
     repeats: int
     act: str = "leaky_relu"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x, train: bool = False):

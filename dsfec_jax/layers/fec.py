@@ -26,7 +26,7 @@ class FEC(nn.Module):
 
     filters: tuple[int, int, int] = (32, 128, 12)
     act: str = "relu"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     def setup(self):
         check_fec_filters(self.filters)

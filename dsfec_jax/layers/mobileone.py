@@ -20,18 +20,19 @@ import numpy as np
 from jax import lax
 
 from .conv import DIMS, DepthwiseImpl, Kernels, fast_shifted_depthwise, kernel_init, shifted_depthwise
+from .kernels import hand_written
 
 BN_EPS = 1e-5        # PyTorch BatchNorm2d defaults (the public RadarNeXt code is PyTorch)
 BN_MOMENTUM = 0.9    # flax momentum = 1 - PyTorch momentum 0.1
 
 
 def rep_conv(x_BxHxWxC, w_KxKxIxO, stride: int, groups: int, impl: DepthwiseImpl = "grouped",
-             kernels: Kernels = "fast"):
+             kernels: Kernels = "auto"):
     """Conv with symmetric K // 2 padding; a depthwise kernel may use the fast shifted form.
     kernels="fast" (layers.conv): the shifted form with its hand-written gradient (autodiff keeps
     all K*K shifted copies) and a dense 1x1 conv as a matmul."""
     k = w_KxKxIxO.shape[0]
-    fast = kernels == "fast"
+    fast = hand_written(kernels)
     if groups > 1 and groups == x_BxHxWxC.shape[-1] == w_KxKxIxO.shape[-1] and impl == "shifted":
         depthwise = fast_shifted_depthwise if fast else shifted_depthwise
         return depthwise(x_BxHxWxC, w_KxKxIxO[:, :, 0, :], stride, (k // 2, k // 2))
@@ -57,7 +58,7 @@ class MobileOneBlock(nn.Module):
     branches: int = 1            # k, num_conv_branches (RadarNeXt: 1)
     deploy: bool = False
     depthwise_impl: DepthwiseImpl = "shifted"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     def groups(self, cin: int) -> int:
         if self.depthwise and cin != self.features:
@@ -99,7 +100,7 @@ class RepDWSeparable(nn.Module):
     branches: int = 1
     deploy: bool = False
     depthwise_impl: DepthwiseImpl = "shifted"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x_BxHxWxC, train: bool = False):

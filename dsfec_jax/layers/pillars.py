@@ -46,7 +46,7 @@ class PointPillarsEncoder(nn.Module):
 
     features: int = 32
     act: str = "relu"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x_BxPxNxD, mask_BxPxN, train: bool = False):
@@ -65,7 +65,7 @@ class PillarFeatureNet(nn.Module):
     encoder: str = "fec"  # "fec" | "pointpillars"
     filters: tuple[int, ...] = (32, 128, 12)
     act: str = "relu"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, points_BxPxNxF, mask_BxPxN, coords_BxPx2, train: bool = False, origin_Bx2=None):

@@ -67,7 +67,7 @@ class ShuffleUnit(nn.Module):
     act: str = "relu"
     split: Split = "chunk"
     depthwise_impl: DepthwiseImpl = "shifted"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x_BxHxWxC, train: bool = False):

@@ -14,69 +14,13 @@ as samples); `table_ap` scores either kind with its own AP.
 
 from __future__ import annotations
 
-import base64
-import dataclasses
-import io
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from . import nuscenes
-
-KINDS = ("nuscenes", "coco")
-
-
-@dataclasses.dataclass(frozen=True)
-class MatchTable:
-    """One class: predictions in the evaluator's order (highest score first) with their hit flags."""
-
-    class_name: str
-    samples: tuple[str, ...]   # sample tokens; `sample_of` and `npos` index them
-    npos: np.ndarray           # (S,) ground-truth boxes of the class per sample (after the filters)
-    sample_of: np.ndarray      # (P,) the sample of each prediction
-    scores: np.ndarray         # (P,)
-    thresholds: tuple[float, ...]  # nuScenes: centre distances (m); COCO: IoUs
-    is_tp: np.ndarray          # (T, P) bool: a hit at each threshold
-    kind: str = "nuscenes"     # whose AP the table resamples: "nuscenes" or "coco"
-
-    def to_bytes(self) -> bytes:
-        buf = io.BytesIO()
-        # the rows are stored in score order, so the AP never reads the scores: float32 is plenty
-        np.savez_compressed(buf, class_name=self.class_name, samples=np.array(self.samples),
-                            npos=self.npos.astype(np.int32), sample_of=self.sample_of.astype(np.int32),
-                            scores=self.scores.astype(np.float32), dist_ths=np.array(self.thresholds),
-                            is_tp=self.is_tp, kind=self.kind)  # "dist_ths": the key of older journals
-        return buf.getvalue()
-
-    def to_text(self) -> str:
-        """base64 of `to_bytes`, to travel inside a JSON record."""
-        return base64.b64encode(self.to_bytes()).decode("ascii")
-
-    @classmethod
-    def from_text(cls, text: str, source: str = "<text>") -> "MatchTable":
-        try:
-            data = base64.b64decode(text.encode("ascii"), validate=True)
-        except (ValueError, UnicodeEncodeError) as err:
-            raise ValueError(f"{source}: not a base64 match table ({err})") from err
-        return cls.from_bytes(data, source)
-
-    @classmethod
-    def from_bytes(cls, data: bytes, source: str = "<bytes>") -> "MatchTable":
-        try:
-            z = np.load(io.BytesIO(data))
-            table = cls(str(z["class_name"]), tuple(str(s) for s in z["samples"]), z["npos"], z["sample_of"],
-                        z["scores"], tuple(float(t) for t in z["dist_ths"]), z["is_tp"].astype(bool),
-                        str(z["kind"]) if "kind" in z.files else "nuscenes")
-        except (KeyError, ValueError, OSError) as err:
-            raise ValueError(f"{source}: not a match table ({err})") from err
-        p = len(table.scores)
-        if table.kind not in KINDS:
-            raise ValueError(f"{source}: match table kind {table.kind!r}; expected one of {KINDS}")
-        if table.is_tp.shape != (len(table.thresholds), p) or table.sample_of.shape != (p,) or \
-                table.npos.shape != (len(table.samples),):
-            raise ValueError(f"{source}: inconsistent match table shapes (is_tp {table.is_tp.shape}, "
-                             f"{p} scores, {len(table.samples)} samples, npos {table.npos.shape})")
-        return table
+from .boxes2d.coco_matches import resampled_coco_ap
+from .match_table import MatchTable
 
 
 def match_table(gt: Mapping, pred: Mapping, class_name: str, dist_ths: Sequence[float] = nuscenes.DIST_THS,
@@ -124,7 +68,6 @@ def table_ap(table: MatchTable, counts: np.ndarray | None = None, columns: Seque
     without ground truth) or COCO's (NaN without ground truth, as COCOeval's -1). `columns`: the
     thresholds the caller reads (COCO computes only those, NaN elsewhere; nuScenes' four are cheap)."""
     if table.kind == "coco":
-        from .boxes2d.coco_matches import resampled_coco_ap
         return resampled_coco_ap(table, counts, columns)
     return resampled_ap(table, counts)
 

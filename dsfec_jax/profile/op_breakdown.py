@@ -18,8 +18,8 @@ metadata, preferring a backward one, since an instruction that reads a backward 
 the backward pass. The share of time attributed that way is reported ('operands'), and whatever
 stays unattributed is listed with its HLO line so a reader sees what it is.
 
-The trace format is read with jaxlib's `ProfileData` (`jax._src.lib._profile_data`, the reader
-behind `jax.profiler.ProfileData`); see https://docs.jax.dev/en/latest/profiling.html.
+The trace format is read with `jax.profiler.ProfileData` (jaxlib's reader); see
+https://docs.jax.dev/en/latest/profiling.html.
 """
 
 from __future__ import annotations
@@ -187,9 +187,9 @@ def xplane_file(directory: str | Path) -> Path:
 def instruction_times(xplane: str | Path, names) -> collections.Counter:
     """Self time (ns, summed over every thread) of each event named in `names`: an event's time
     less that of events of `names` nested inside it on the same thread, so nothing counts twice."""
-    from jax._src.lib import _profile_data
+    from jax.profiler import ProfileData
 
-    data = _profile_data.ProfileData.from_file(str(xplane))
+    data = ProfileData.from_file(str(xplane))
     times: collections.Counter = collections.Counter()
     for plane in data.planes:
         for line in plane.lines:

@@ -171,21 +171,20 @@ def onnx_measure(space: SearchSpace, repeats: int = 10, warmup: int = 2, threads
     MatMul), without the decode."""
     import tempfile
 
-    from dsfec_jax.deploy.export import grouped, onnx_model
+    from dsfec_jax.deploy.export import onnx_model
     from dsfec_jax.deploy.ort import ort_session
     from dsfec_jax.profile.latency import time_interleaved, timing_variables
 
     def session(genes: Genes, workdir: Path):
         det = zoo.create(space.base, **space.overrides(genes))
-        rd = zoo.family_of(det.config).modality == "rd"
-        det = det if rd else grouped(det)
+        det, matmul_einsums = space.engine.onnx_form(det)
         variables, inputs = timing_variables(det), det.dummy_inputs(1)
         names = list(inputs)
         fn = lambda *x: tuple(jax.tree.leaves(det.apply(variables, dict(zip(names, x)))))  # noqa: E731
         specs = [jax.ShapeDtypeStruct(inputs[k].shape, inputs[k].dtype) for k in names]
         outputs = [f"out{i}" for i in range(len(jax.eval_shape(fn, *specs)))]
         path = workdir / f"{key(genes)}.onnx"
-        path.write_bytes(onnx_model(fn, specs, names, outputs, matmul_einsums=rd).SerializeToString())
+        path.write_bytes(onnx_model(fn, specs, names, outputs, matmul_einsums=matmul_einsums).SerializeToString())
         sess, feeds = ort_session(path, threads), {k: np.asarray(v) for k, v in inputs.items()}
         return lambda: sess.run(None, feeds)
 

@@ -6,7 +6,7 @@ a list of score dicts, in the same order), backed by `workers` Ray actors. Each 
   its node, disjoint from the other actors' on the same node, before XLA starts (as
   dsfec_jax.core.threads does for --threads: XLA sizes its CPU pool from the process's affinity);
 - then calls `factory()` once to build its scorer. For a NAS run the factory is
-  `engine_scorer(space, profile, ...)`: the engine's own scorer (run.rd_engine / point_engine)
+  `engine_scorer(space, profile, ...)`: the engine's own scorer (engines.rd_engine / point_engine)
   over the finished supernet, read from RUN_DIR/supernet's last checkpoint (spos.finished_supernet).
   The driver trains the supernet before any actor starts; an actor trains and writes nothing;
 - then scores one subnet per call. The driver hands subnets out as actors come free (ray.util's
@@ -44,7 +44,7 @@ DEFAULT_WORKERS = 2  # where the cluster reports no CPUs
 def engine_scorer(space_name: str, p, profile: str, run_dir: str, seed: int):
     """The NAS engine's scorer over the finished supernet in run_dir: what each actor builds once
     (imports here, after the actor pinned its threads; nothing trains)."""
-    from .run import engine_for
+    from .engines import engine_for
     from .spaces import get_space
 
     space = get_space(space_name)

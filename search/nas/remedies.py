@@ -50,7 +50,8 @@ from dsfec_jax.train.loop import checkpoints
 from ..journal import Journal
 from ..ranking import kendall_tau, tau_p_value
 from ..recipes import get_recipe
-from .run import PROFILES, accumulated_seconds, supernet
+from .engines import PROFILES, RD_ENGINE, supernet
+from .run import accumulated_seconds
 from .space import from_key
 from .spaces import get_space
 from .spos import SAMPLINGS, SubnetScorer
@@ -93,7 +94,7 @@ def supernet_remedy(run_dir: Path, space_name: str, profile: str, seed: int, ste
                     name: str | None, command: str, progress: bool = False, log=print) -> dict:
     """Train (or resume) another supernet for the run (RUN_DIR/remedies/NAME) and score the ranking
     study's subnets with it -> the remedies.json row (tau and p against the study's stand-alone scores)."""
-    from .run import engine_for
+    from .engines import engine_for
 
     study = json.loads((run_dir / "ranking.json").read_text())
     keys, standalone = [pair["key"] for pair in study["pairs"]], [pair["standalone"] for pair in study["pairs"]]
@@ -200,7 +201,7 @@ def main(argv=None) -> int:
                               args.name, command, args.progress)
         write_results(run_dir, supernet=row)
         return 0
-    if zoo.family_of(space.base).modality != "rd":
+    if space.engine is not RD_ENGINE:  # what follows re-scores the RD engine's supernet and data
         raise SystemExit(f"--val-samples / --calibration-batches re-score RD runs only ({space.name} is not); "
                          "--supernet-steps works for every space")
     study = json.loads((run_dir / "ranking.json").read_text())

@@ -3,13 +3,13 @@
 RUN_DIR/supernet holds the supernet's training run (train.loop: resumes from its last
 checkpoint), RUN_DIR/journal.jsonl every scored subnet, RUN_DIR/evolution.json (or
 optuna.journal) the search's progress, and RUN_DIR/report.md + pareto_*.png the reports. A killed
-run started again with the same command picks up where it stopped.
+run started again with the same command picks up where it stopped. The space's engine
+(engines.py) trains its supernet and scores its subnets.
 """
 
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -18,45 +18,18 @@ from typing import Callable
 from dsfec_jax import zoo
 from dsfec_jax.core import atomic
 from dsfec_jax.core.environment import environment
-from dsfec_jax.data.rd.sources import load_rd_samples
-from dsfec_jax.train.schedules import get_schedule
 
-from ..inherit import describe
 from ..journal import Journal
+from .engines import PROFILES, engine_for
 from .evolution import Evolution, EvolutionSettings, progress_table
 from .latency import RECORDS, LatencyTable
 from .register import register
 from .report import write_report
 from .space import SearchSpace, key
 from .spaces import get_space
-from .spos import SubnetScorer, model_costs, subnet_costs, train_supernet
+from .spos import model_costs, subnet_costs
 from .standalone import choose, ranking_study, retrain
 from .standalone import markdown as ranking_markdown
-
-
-@dataclasses.dataclass(frozen=True)
-class NasProfile:
-    """The budget of a run: data, supernet steps, search size."""
-
-    train_samples: int
-    val_samples: int
-    supernet_steps: int | None  # None: the schedule's own length over the training samples
-    batch_size: int
-    population: int
-    generations: int
-    top_k: int
-    calibration_batches: int
-    schedule: str
-
-
-PROFILES = {
-    # a few minutes end to end: the command's wiring, not a result
-    "smoke": NasProfile(32, 8, 6, 4, 6, 2, 3, 2, "yolo_quick"),
-    # sized for a 2-core CPU: ~10 min of supernet, ~80 subnets scored
-    "quick": NasProfile(600, 100, 600, 16, 16, 5, 5, 8, "yolo_quick"),
-    # the paper's search (P 50, T 20, k 15) on a supernet trained with the paper's recipe: a GPU job
-    "paper": NasProfile(1000, 200, None, 64, 50, 20, 15, 16, "yolo_paper"),
-}
 
 
 class CachedCosts:
@@ -96,75 +69,6 @@ def shipped_reference(model: str) -> dict | None:
     val = json.loads(manifest.read_text())["measured"]["val"]
     costs = model_costs(model, {})
     return {"label": f"{model} (stand-alone, shipped)", **costs, **{k: val.get(k) for k in ("mAP50", "mAP50_95")}}
-
-
-def supernet(space: SearchSpace, p: NasProfile, run_dir: Path, seed: int = 0, progress: bool = True,
-             load_only: bool = False):
-    """The profile's training maps, SPOS step count and (detector, subnet inputs, state) of the run's
-    supernet: trained, or resumed from RUN_DIR/supernet (nothing trains once it is finished);
-    `load_only`: the finished supernet read from its last checkpoint, nothing trained or written."""
-    train = load_rd_samples("synthetic", "train", p.train_samples)
-    schedule = get_schedule(p.schedule, batch_size=p.batch_size)
-    steps = p.supernet_steps or schedule.total_steps(len(train))
-    return train, steps, train_supernet(space, train, schedule, run_dir / "supernet", steps, seed, progress,
-                                        load_only=load_only)
-
-
-@dataclasses.dataclass
-class Engine:
-    """What a family brings to a run: its trained supernet's steps, the subnet scorer, the metric
-    that ranks subnets, and how the report names its data."""
-
-    steps: int
-    scorer: Callable
-    metric: str
-    data: str
-    calibration: str
-    init: str | None = None  # what the supernet started from, given to the stand-alone retraining too
-
-
-# An engine function: (space, profile, profile name, run dir, seed, progress, load_only=False) -> Engine.
-# load_only (Ray scoring actors, search.nas.ray_scoring): the same scorer over the supernet the
-# driver finished, read from RUN_DIR/supernet's last checkpoint; nothing trains or writes.
-def rd_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path, seed: int, progress: bool,
-              load_only: bool = False, sampling: str = "uniform") -> Engine:
-    if sampling != "uniform":
-        raise ValueError(f"--sampling {sampling}: the RD supernet trains with uniform sampling only (sandwich: DSFEC-style spaces)")
-    val = load_rd_samples("synthetic", "val", p.val_samples)
-    train, steps, (det, subnet_inputs, state) = supernet(space, p, run_dir, seed, progress, load_only)
-    scorer = SubnetScorer(det, subnet_inputs, state, train, val, seed, p.calibration_batches, p.batch_size)
-    return Engine(steps, scorer, "mAP50", f"synthetic RD benchmark, {len(val)} val maps",
-                  f"{p.calibration_batches} batches of {p.batch_size} maps")
-
-
-def point_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path, seed: int, progress: bool,
-                 load_only: bool = False, sampling: str = "uniform") -> Engine:
-    """DSFEC-style families: the family's search recipe of the same name sets the data, grid and
-    batch (search.recipes); the NAS profile the SPOS steps and the calibration frames (as many
-    as the RD profile's)."""
-    from dsfec_jax.data.points.sources import load_frames
-
-    from ..recipes import get_recipe
-    from .spos_points import PointSubnetScorer, train_point_supernet
-
-    recipe, family = get_recipe(profile, space.base), zoo.family_of(space.base)
-    frames = load_frames(recipe.data, "train", recipe.train_frames, seed=0, features=family.points.input_columns)
-    val = load_frames(recipe.data, "val", recipe.val_frames, seed=0, features=family.points.input_columns)
-    steps = p.supernet_steps or recipe.supernet_steps or recipe.schedule.total_steps(len(frames))
-    det, validator, subnet_inputs, state, stream = train_point_supernet(space, recipe, frames, run_dir / "supernet",
-                                                                       steps, seed, progress, load_only=load_only,
-                                                                       sampling=sampling)
-    batch = recipe.schedule.batch_size
-    calibration = max(1, p.calibration_batches * p.batch_size // batch)
-    scorer = PointSubnetScorer(det, validator, subnet_inputs, state, stream, val, calibration)
-    shipped = zoo.shipped_weights(space.base)
-    return Engine(steps, scorer, family.metric.headline,
-                  f"`{recipe.data}` point-cloud benchmark at the `{profile}` search recipe's grid, {len(val)} val frames",
-                  f"{calibration} batches of {batch} frames", describe(shipped, leading=True) if shipped.is_file() else None)
-
-
-def engine_for(space: SearchSpace):
-    return rd_engine if zoo.family_of(space.base).modality == "rd" else point_engine
 
 
 def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strategy: str = "evolution",
@@ -213,8 +117,7 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
     hand = space.base_genes()  # one subnet, scored here (a resumed finished search then starts no Ray)
     references = [{"label": f"{space.base} (inherited)", **costs(hand), **engine.scorer([hand])[0]}]
     records = [r for r in Journal(run_dir).records() if r.get("status") == "ok"]
-    if zoo.family_of(space.base).modality == "rd":  # shipped manifests score the same val maps
-        references += [r for r in (shipped_reference(m) for m in ("yolov8n", space.base)) if r]
+    references += [r for r in (shipped_reference(m) for m in engine.shipped) if r]  # scored on the same val data
     meta = {"command": command, "space": space.name, "space_size": space.size(), "profile": profile,
             "strategy": strategy, "limits": limits, "seed": seed, "supernet_steps": steps, "sampling": sampling,
             "wall_s": round(time.perf_counter() - t0, 1), "environment": environment()}

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -57,6 +57,9 @@ class SearchSpace:
     to_overrides: Callable[[dict], dict] = dataclasses.field(compare=False)
     description: str = ""
     base_choices: dict = dataclasses.field(default_factory=dict, compare=False)  # the base model's, where not largest
+    # how a NAS run trains its supernet and scores its subnets (a search.nas.engines.EngineKind;
+    # None for a space that is only sampled, never run)
+    engine: Any = dataclasses.field(default=None, compare=False)
 
     def __post_init__(self):
         names = [c.name for c in self.choices]

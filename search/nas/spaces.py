@@ -17,6 +17,7 @@ from __future__ import annotations
 from dsfec_jax import zoo
 from dsfec_jax.models.yolo_rd.config import SHIPPED_SMALL_SIDE, scaled_width
 
+from .engines import POINT_ENGINE, RD_ENGINE
 from .space import Choice, SearchSpace
 
 QUARTERS = (0.25, 0.5, 0.75, 1.0)
@@ -46,7 +47,7 @@ def yolov8n_adapter_space(base: str = "yolov8n_adapter") -> SearchSpace:
                 "assign_small_side": YOLO_RD_SEARCH_SMALL_SIDE}
 
     return SearchSpace("yolov8n_adapter", base, tuple(backbone + stem + exchangers + neck), to_overrides,
-                       "the YOLOv8n-Adapter paper's Table 1", {x.name: 1 for x in exchangers})
+                       "the YOLOv8n-Adapter paper's Table 1", {x.name: 1 for x in exchangers}, RD_ENGINE)
 
 
 def dsfec_space(base: str = "dsfec_m") -> SearchSpace:
@@ -65,7 +66,7 @@ def dsfec_space(base: str = "dsfec_m") -> SearchSpace:
 
     own = {stem.name: cfg.stem_filters, **{x.name: n for x, n in zip(blocks, cfg.stage_blocks)}}
     return SearchSpace("dsfec", base, (stem, *widths, *blocks), to_overrides,
-                       "DSFEC's stem filters, stage widths and blocks per stage, jointly", own)
+                       "DSFEC's stem filters, stage widths and blocks per stage, jointly", own, POINT_ENGINE)
 
 
 SPACES = {"yolov8n_adapter": yolov8n_adapter_space, "dsfec": dsfec_space}

@@ -308,3 +308,51 @@ def test_batch_norm_equals_flax_in_values_statistics_and_gradients(kernels, shap
     evaluated = [m.clone(use_running_average=True).apply({"params": params, "batch_stats": stats}, x)
                  for m in (ours, nn.BatchNorm(momentum=0.9, epsilon=1e-3))]
     np.testing.assert_array_equal(evaluated[0], evaluated[1])
+
+
+@pytest.mark.parametrize("kernels,backend,switch,expected", [
+    ("auto", "cpu", None, True), ("auto", "gpu", None, False), ("auto", "tpu", None, False),  # measured on the CPU only
+    ("fast", "gpu", None, True), ("plain", "cpu", None, False),
+    ("fast", "cpu", "off", False), ("auto", "cpu", "xla", False), ("auto", "cpu", "auto", True)])
+def test_kernels_auto_picks_the_hand_written_ones_on_the_cpu_only(kernels, backend, switch, expected, monkeypatch):
+    from dsfec_jax.layers import kernels as kernels_module
+
+    monkeypatch.setattr(kernels_module.jax, "default_backend", lambda: backend)
+    if switch is None:
+        monkeypatch.delenv("DSFEC_KERNELS", raising=False)
+    else:
+        monkeypatch.setenv("DSFEC_KERNELS", switch)
+    assert kernels_module.hand_written(kernels) is expected
+
+
+def test_an_unknown_switch_value_names_the_variable(monkeypatch):
+    monkeypatch.setenv("DSFEC_KERNELS", "fastest")
+    with pytest.raises(ValueError, match="DSFEC_KERNELS='fastest'.*'off' or 'xla'"):
+        Conv(4, 1).init(jax.random.key(0), jnp.zeros((1, 4, 4, 2)))
+
+
+SWITCHED_LAYERS = [lambda k: Conv(FAST_CONV_MIN_CHANNELS, 1, kernels=k), lambda k: Conv(FAST_CONV_MIN_CHANNELS, 3, kernels=k),
+                   lambda k: DepthwiseConv(3, 1, kernels=k), lambda k: ConvTranspose(FAST_CONV_MIN_CHANNELS, 3, 2, kernels=k),
+                   lambda k: PointLinear(6, kernels=k)]
+
+
+@pytest.mark.parametrize("layer", SWITCHED_LAYERS)
+def test_the_switch_turns_every_hand_written_kernel_off(layer, monkeypatch):
+    """DSFEC_KERNELS=off: a layer built "fast" (or "auto", the default, on this CPU) traces no
+    hand-written formulation and its training step lowers to no custom call (the numba depthwise
+    gradient is one); it computes the XLA formulation's gradients, which the hand-written ones
+    match to RTOL."""
+    x = jax.random.normal(jax.random.key(0), (1, 8, 8, FAST_CONV_MIN_CHANNELS))
+    variables = layer("plain").init(jax.random.key(1), x)
+    forward = lambda k: str(jax.make_jaxpr(lambda v: layer(k).apply(v, x))(variables))  # noqa: E731
+    grad = lambda k: jax.jit(jax.grad(lambda v: jnp.sum(jnp.sin(layer(k).apply(v, x)))))  # noqa: E731
+    monkeypatch.delenv("DSFEC_KERNELS", raising=False)
+    assert "custom_vjp_call" in forward("auto") or "dot_general" in forward("auto")  # 1x1 convs: a matmul forward
+    fast = grad("fast")(variables)
+    if isinstance(layer("fast"), DepthwiseConv):  # the FFI call the switch must remove
+        assert "custom_call @dsfec_depthwise_kernel_grad" in grad("auto").lower(variables).as_text()
+    monkeypatch.setenv("DSFEC_KERNELS", "off")
+    for kernels in ("fast", "auto"):
+        assert forward(kernels) == forward("plain")
+        assert "custom_call" not in grad(kernels).lower(variables).as_text()
+    assert rel_err(fast, grad("fast")(variables)) < RTOL  # switched: the plain program (its jaxpr above)

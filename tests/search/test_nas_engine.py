@@ -255,3 +255,27 @@ def test_a_checked_table_is_scored_on_subnets_its_fit_never_saw():
     held_out = [r["subnet"] for r in table.setup["check"]["rows"]]
     assert held_out and table.setup["fitted_on"] + len(held_out) == len(seen[0])
     assert table.setup["check"]["max_abs_error_pct"] > 0 and table.setup["runtime"] == "toy"
+
+
+def test_each_space_names_its_engine_and_export_form():
+    """The run, the Ray actors, the remedies and the ONNX latency table ask the space's engine
+    (search.nas.engines) what differs between RD and point spaces, never the modality's name."""
+    from search.nas.engines import RD_ENGINE, engine_for, point_engine, rd_engine
+
+    rd, points = get_space("yolov8n_adapter"), get_space("dsfec")
+    assert engine_for(rd) is rd_engine and engine_for(points) is point_engine
+    det = zoo.create("dsfec_s")
+    grouped, matmul = points.engine.onnx_form(det)
+    assert (grouped.config.depthwise_impl, grouped.config.kernels, matmul) == ("grouped", "plain", False)
+    assert RD_ENGINE.onnx_form(det) == (det, True)
+    bare = SearchSpace("toy", "dsfec_s", (Choice("a", (1, 2)),), lambda c: {})
+    with pytest.raises(ValueError, match="'toy' names no NAS engine"):
+        engine_for(bare)
+
+
+def test_remedies_rescore_only_the_rd_engines_runs(tmp_path):
+    from search.nas import remedies
+
+    (tmp_path / "ranking.json").write_text("{}")
+    with pytest.raises(SystemExit, match="re-score RD runs only \\(dsfec is not\\)"):
+        remedies.main([str(tmp_path), "--space", "dsfec"])

@@ -134,7 +134,7 @@ def test_two_actors_score_a_batch_as_the_in_process_scorer_does(tmp_path, local_
     statistics' sums differ by up to 3e-7 relative (reductions split by thread count; with this
     process on 1 thread too they agree bit for bit); the mAPs (0 here) agreed exactly."""
     from search.nas.ray_scoring import RayScorer, nas_factory
-    from search.nas.run import PROFILES, rd_engine
+    from search.nas.engines import PROFILES, rd_engine
 
     space, p = get_space("yolov8n_adapter"), PROFILES["smoke"]
     finished_random_supernet(space, tmp_path, p.supernet_steps)
@@ -161,7 +161,7 @@ def test_the_command_scores_the_search_through_ray_actors(tmp_path, monkeypatch)
     from search.journal import Journal
     from search.nas import __main__ as cli
     from search.nas import ray_scoring, run
-    from search.nas.run import Engine
+    from search.nas.engines import Engine
 
     seen = {}
     monkeypatch.setattr(cli, "run_nas", lambda *a, **kw: seen.update(kw) or tmp_path / "report.md")

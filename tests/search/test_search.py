@@ -392,3 +392,12 @@ def test_quick_depth_sweep_starts_from_the_shipped_weights(tiny_search, tmp_path
     from search.inherit import initial_variables
     with pytest.raises(ValueError, match="planned from"):
         initial_variables(depth["init"])
+
+
+@pytest.mark.parametrize("base,source,kind", [("shuffle_yolov3", "street", "CameraImage"), ("yolov8n", "synthetic", "RDSample"),
+                                              ("dsfec_s", "synthetic", "Frame")])
+def test_a_trial_loads_its_models_samples_through_its_modality(base, source, kind):
+    """search.trial.load_data asks the model's Modality record: an image model gets camera images
+    (it once fell through to point frames), an RD model RD samples, a point model frames."""
+    samples = trial.load_data(base, source, "val", 1)
+    assert len(samples) == 1 and type(samples[0]).__name__ == kind

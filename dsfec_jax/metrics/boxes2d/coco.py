@@ -14,7 +14,7 @@ removed and COCOeval.summarize() runs on the 10 standard columns, so mAP@[.5:.95
 stats average exactly the standard thresholds. AP@70 is a standard column.
 
 With `match_classes`, the result also carries those classes' per-image matches
-(coco_matches.MatchTable, kind "coco") for bootstrap intervals over the evaluated images.
+(match_table.MatchTable, kind "coco") for bootstrap intervals over the evaluated images.
 
 pycocotools conventions kept: an undefined number (no ground truth) is -1 in `stats`; the named
 fields turn it into NaN. A class without ground truth has per-class AP NaN. pycocotools' prints
@@ -32,7 +32,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ...boxes.boxes2d import Boxes2D
-from ..resampling import MatchTable
+from ..match_table import MatchTable
 from . import coco_matches
 from .coco_json import CocoGroundTruth, coco_dets_to_list, coco_gt_to_dict, default_category_ids, default_image_ids
 

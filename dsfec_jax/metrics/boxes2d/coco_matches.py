@@ -2,7 +2,7 @@
 
 COCOeval matches every (image, class) on its own (evaluateImg), so whether a detection hits at an
 IoU threshold does not change when other images are added, dropped or repeated. `match_tables`
-reads COCOeval's per-image results into one `resampling.MatchTable` per class (kind "coco": the
+reads COCOeval's per-image results into one `match_table.MatchTable` per class (kind "coco": the
 detections in accumulate's order, their hit flags at each IoU threshold, the non-ignored ground
 truth per image), and `resampled_coco_ap` redoes accumulate's 101-point interpolated precision on
 any multiset of the images: repeat each detection as often as its image is drawn (copies stay
@@ -16,7 +16,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from ..resampling import MatchTable
+from ..match_table import MatchTable
 
 # COCOeval.Params.recThrs: 0:.01:1
 RECALL_POINTS = np.linspace(0.0, 1.00, int(np.round((1.00 - 0.0) / 0.01)) + 1, endpoint=True)

@@ -47,17 +47,17 @@ import dataclasses
 
 import numpy as np
 
+from ...layers.kernels import KERNELS
+from .layout import INPUT, STAGES, STRIDES
+
 # PASCAL VOC's 20 classes in the order of darknet's data/voc.names (and py-faster-rcnn); models/ may
 # not import data/, so the tuple lives here (data/camera/voc.py names the same classes).
 VOC_CLASSES = ("aeroplane", "bicycle", "bird", "boat", "bottle", "bus", "car", "cat", "chair", "cow",
                "diningtable", "dog", "horse", "motorbike", "person", "pottedplant", "sheep", "sofa",
                "train", "tvmonitor")
-STRIDES = (8, 16, 32)
 BACKBONES = ("shuffle", "darknet53")
 FIRST_REPEATS = ("stem", "unit")
 FPN_MERGES = ("concat", "add")
-INPUT = "image"  # the one input: (B, H, W, 3) float32 in [0, 1], H and W multiples of 32
-STAGES = 5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,7 +88,7 @@ class CameraConfig:
     split: str = "chunk"  # 'chunk' (torchvision) | 'even_odd' (megvii)
     prior_bias: bool = True  # output biases: ultralytics' priors (True) or darknet's zeros
     depthwise_impl: str = "shifted"  # "shifted" (fast jitted CPU) | "grouped" (ONNX export)
-    kernels: str = "fast"  # "fast" (CPU training formulations) | "plain" (textbook ones; layers/conv.py)
+    kernels: str = "auto"  # "auto" (the CPU training formulations on the CPU) | "fast" | "plain" (layers/kernels.py)
     notes: str = ""
 
     def __post_init__(self):
@@ -124,7 +124,7 @@ class CameraConfig:
         return (self.deep_kernel, self.deep_act) if self.deep_heads[level] else (self.kernel, self.act)
 
     def build(self):
-        from .net import CameraNet  # net imports this module
+        from .net import CameraNet  # here: the net's modules load only when a network is built
 
         return CameraNet(self)
 
@@ -153,7 +153,7 @@ def validate(cfg: CameraConfig) -> None:
          f"{len(STRIDES)} widths, ordered by stride {STRIDES}")
     need(cfg.fpn_merge in FPN_MERGES, "fpn_merge", f"one of {FPN_MERGES}")
     need(cfg.depthwise_impl in ("shifted", "grouped"), "depthwise_impl", "'shifted' or 'grouped'")
-    need(cfg.kernels in ("fast", "plain"), "kernels", "'fast' or 'plain'")
+    need(cfg.kernels in KERNELS, "kernels", " or ".join(map(repr, KERNELS)))
     if cfg.backbone != "shuffle":
         return
     need(cfg.first_repeat in FIRST_REPEATS, "first_repeat", f"one of {FIRST_REPEATS}")

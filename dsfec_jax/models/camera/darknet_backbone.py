@@ -8,17 +8,19 @@ stride-2 conv to widths 64/128/256/512/1024 and 1/2/8/8/4 residual blocks (layer
 
 from __future__ import annotations
 
+from typing import Any
+
 import flax.linen as nn
 
 from ...layers.blocks import ConvBNAct
 from ...layers.darknet import DarknetStage
-from .config import STAGES, CameraConfig
+from .layout import STAGES
 
 TAPS = (2, 3, 4)  # the stages at strides 8, 16, 32 (darknet layers 36, 61, 74)
 
 
 class Darknet53(nn.Module):
-    cfg: CameraConfig
+    cfg: Any  # a CameraConfig (config.py imports the net to build it, so the net never imports config.py)
 
     @nn.compact
     def __call__(self, x, train: bool = False):

@@ -11,12 +11,12 @@ Variables: {'params', 'batch_stats'} with subtrees 'backbone' and 'head'.
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Any, Callable
 
 import flax.linen as nn
 
-from .config import INPUT, CameraConfig
 from .darknet_backbone import Darknet53
+from .layout import INPUT
 from .shufflenet_backbone import ShuffleBackbone
 from .yolo3_neck_head import YoloV3Head, darknet_level, shuffle_level
 
@@ -30,7 +30,7 @@ ARCHITECTURES: dict[str, tuple[type[nn.Module], Callable]] = {
 
 
 class CameraNet(nn.Module):
-    cfg: CameraConfig
+    cfg: Any  # a CameraConfig (config.py imports this module to build the net, so it is not imported here)
 
     def setup(self):
         backbone, level = ARCHITECTURES[self.cfg.backbone]

@@ -10,17 +10,19 @@ deep stages). config.py says why each choice.
 
 from __future__ import annotations
 
+from typing import Any
+
 import flax.linen as nn
 
 from ...layers.blocks import ConvBNAct
 from ...layers.shufflenet import ShuffleUnit
-from .config import STAGES, CameraConfig
+from .layout import STAGES
 
 TAPS = (2, 3, 4)  # the stages at strides 8, 16, 32
 
 
 class ShuffleBackbone(nn.Module):
-    cfg: CameraConfig
+    cfg: Any  # a CameraConfig (config.py imports the net to build it, so the net never imports config.py)
 
     @nn.compact
     def __call__(self, x, train: bool = False):

@@ -21,7 +21,7 @@ block (net.py's table names one per backbone):
 from __future__ import annotations
 
 import math
-from typing import Callable
+from typing import Any, Callable
 
 import flax.linen as nn
 import jax.numpy as jnp
@@ -31,7 +31,6 @@ from ...layers.blocks import ConvBNAct
 from ...layers.conv import Conv
 from ...layers.shufflenet import ShuffleUnit
 from ...layers.yolo import upsample_nearest
-from .config import CameraConfig
 
 
 def output_bias(num_anchors: int, num_classes: int, stride: int, prior: bool) -> np.ndarray:
@@ -56,7 +55,7 @@ class DarknetLevel(nn.Module):
 
     width: int
     act: str = "leaky_relu"
-    kernels: str = "fast"
+    kernels: str = "auto"
 
     @nn.compact
     def __call__(self, x, train: bool = False):
@@ -77,7 +76,7 @@ class ShuffleLevel(nn.Module):
     act: str = "hard_swish"
     split: str = "chunk"
     depthwise_impl: str = "shifted"
-    kernels: str = "fast"
+    kernels: str = "auto"
 
     @nn.compact
     def __call__(self, x, train: bool = False):
@@ -88,17 +87,17 @@ class ShuffleLevel(nn.Module):
         return x, x
 
 
-def darknet_level(cfg: CameraConfig, level: int, name: str) -> nn.Module:
+def darknet_level(cfg, level: int, name: str) -> nn.Module:
     return DarknetLevel(cfg.head_widths[level], cfg.act, cfg.kernels, name=name)
 
 
-def shuffle_level(cfg: CameraConfig, level: int, name: str) -> nn.Module:
+def shuffle_level(cfg, level: int, name: str) -> nn.Module:
     kernel, act = cfg.head_style(level)
     return ShuffleLevel(cfg.head_widths[level], cfg.head_units, kernel, act, cfg.split, cfg.depthwise_impl,
                         cfg.kernels, name=name)
 
 
-def lateral_width(cfg: CameraConfig, level: int, tap_width: int) -> int:
+def lateral_width(cfg, level: int, tap_width: int) -> int:
     """Width of the lateral into finer level `level`: half that level's width (YOLOv3's 256 and 128)
     to concatenate, the tap's width to add."""
     return cfg.head_widths[level] // 2 if cfg.fpn_merge == "concat" else tap_width
@@ -119,8 +118,8 @@ class YoloV3Head(nn.Module):
     """(C3, C4, C5) -> raw maps at strides 8, 16, 32 (module docstring); `level(cfg, l, name)` builds
     level l's block."""
 
-    cfg: CameraConfig
-    level: Callable[[CameraConfig, int, str], nn.Module]
+    cfg: Any  # a CameraConfig (config.py imports the net to build it, so the net never imports config.py)
+    level: Callable[[Any, int, str], nn.Module]
 
     @nn.compact
     def __call__(self, feats, train: bool = False):

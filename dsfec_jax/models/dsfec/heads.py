@@ -22,7 +22,7 @@ class DenseHead(nn.Module):
     kind: str = "conv"  # "conv" | "dsconv"
     act: str = "swish"
     depthwise_impl: DepthwiseImpl = "shifted"
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, x, train: bool = False):

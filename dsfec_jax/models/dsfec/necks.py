@@ -15,7 +15,7 @@ class TopDownNeck(nn.Module):
     so len(widths) stages are used and the output has the resolution of the finest one."""
 
     widths: tuple[int, ...] = (192, 128, 64)
-    kernels: Kernels = "fast"
+    kernels: Kernels = "auto"
 
     @nn.compact
     def __call__(self, stages: list, train: bool = False):

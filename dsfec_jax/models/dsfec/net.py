@@ -46,7 +46,7 @@ class DSFECConfig:
     stage_widths: tuple[int, int, int, int] = (96, 192, 256, 384)
     stage_strides: tuple[int, int, int, int] = (1, 2, 2, 2)
     depthwise_impl: str = "shifted"  # "shifted" (fast jitted CPU) | "grouped" (ONNX export)
-    kernels: str = "fast"  # "fast" (CPU training formulations) | "plain" (textbook ones; layers/conv.py)
+    kernels: str = "auto"  # "auto" (the CPU training formulations on the CPU) | "fast" | "plain" (layers/kernels.py)
     # neck and heads
     neck_widths: tuple[int, ...] = (192, 128, 64)
     head_convs: int = 4

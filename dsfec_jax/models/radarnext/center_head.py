@@ -28,7 +28,7 @@ class CenterHead(nn.Module):
     num_classes: int
     width: int = 64
     corner_head: bool = True  # an auxiliary training target; dropped from the deployed model
-    kernels: str = "fast"  # layers.conv.Kernels
+    kernels: str = "auto"  # layers.conv.Kernels
 
     @nn.compact
     def __call__(self, x, train: bool = False) -> dict:

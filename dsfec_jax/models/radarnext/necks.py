@@ -33,7 +33,7 @@ class SECONDFPN(nn.Module):
     no bias), concatenated."""
 
     channels: int = 128
-    kernels: str = "fast"  # layers.conv.Kernels
+    kernels: str = "auto"  # layers.conv.Kernels
 
     @nn.compact
     def __call__(self, stages: list, train: bool = False):
@@ -56,7 +56,7 @@ class PANeck(nn.Module):
     branches: int = 1
     deploy: bool = False
     depthwise_impl: DepthwiseImpl = "shifted"
-    kernels: str = "fast"  # layers.conv.Kernels
+    kernels: str = "auto"  # layers.conv.Kernels
 
     def _dcn(self, position: int, x):
         if position not in self.dcn_positions:

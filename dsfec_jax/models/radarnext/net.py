@@ -56,7 +56,7 @@ class RadarNeXtConfig:
     classes: tuple[str, ...] = VOD_CLASSES
     corner_head: bool = True
     depthwise_impl: str = "shifted"  # "shifted" (fast jitted CPU) | "grouped" (ONNX export)
-    kernels: str = "fast"  # "fast" (CPU training formulations) | "plain" (textbook ones; layers/conv.py)
+    kernels: str = "auto"  # "auto" (the CPU training formulations on the CPU) | "fast" | "plain" (layers/kernels.py)
     notes: str = ""
 
 
@@ -113,7 +113,7 @@ class RepDWCBackbone(nn.Module):
     branches: int = 1
     deploy: bool = False
     depthwise_impl: str = "shifted"
-    kernels: str = "fast"  # layers.conv.Kernels
+    kernels: str = "auto"  # layers.conv.Kernels
 
     @nn.compact
     def __call__(self, x, train: bool = False) -> list:
@@ -131,7 +131,7 @@ class DenseBackbone(nn.Module):
 
     layer_nums: tuple[int, ...]
     channels: tuple[int, ...]
-    kernels: str = "fast"
+    kernels: str = "auto"
 
     @nn.compact
     def __call__(self, x, train: bool = False) -> list:

@@ -28,13 +28,15 @@ whose initialize_weights sets every BatchNorm2d so).
 
 from __future__ import annotations
 
+from typing import Any
+
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
 from ...layers.coord_attention import CoordinateAttention
 from ...layers.yolo import BN_EPS, BN_MOMENTUM, YoloConv
-from .config import SEARCHABLE, YoloRDConfig
+from .layout import SEARCHABLE
 
 
 def resize_to(x_BxHxWxC, hw: tuple[int, int]):
@@ -107,7 +109,7 @@ class Exchanger(nn.Module):
 class Adapter(nn.Module):
     """The auxiliary branch: `stem` once, then `exchange` after each of its backbone layers."""
 
-    cfg: YoloRDConfig
+    cfg: Any  # a YoloRDConfig (config.py imports the net to build it, so the net never imports config.py)
 
     def setup(self):
         c = self.cfg

@@ -13,7 +13,6 @@ from __future__ import annotations
 from .backbone import YoloBackbone
 from .backbone_v9 import GelanBackbone
 from .backbone_v10 import V10Backbone
-from .config import YoloRDConfig
 from .head import DetectHead
 from .head_v10 import V10DetectHead
 from .neck import YoloNeck
@@ -27,7 +26,7 @@ PARTS = {
 }
 
 
-def build_parts(cfg: YoloRDConfig):
+def build_parts(cfg):
     """(backbone, neck, head) modules of `cfg.arch`, unbound (the caller names them)."""
     backbone, neck, head = PARTS[cfg.arch]
     elastic = {"width_ratios": tuple(cfg.neck_width_ratios), "full_ch0": cfg.width(256)} if cfg.elastic else {}

@@ -9,12 +9,11 @@ that loop for every base (backbone_v9.py and backbone_v10.py give it their own l
 from __future__ import annotations
 
 import functools
-from typing import Callable
+from typing import Any, Callable
 
 import flax.linen as nn
 
 from ...layers.yolo import C2f, SPPF, YoloConv
-from .config import YoloRDConfig
 
 # (module, yaml channels, yaml repeats, stride) of yolov8.yaml's backbone, layers 0-9
 BACKBONE = (
@@ -40,7 +39,7 @@ YOLOV8_MODULES = {
 }
 
 
-def scaled_layer(table: tuple, modules: dict, cfg: YoloRDConfig, index: int) -> nn.Module:
+def scaled_layer(table: tuple, modules: dict, cfg, index: int) -> nn.Module:
     """Layer `index` of a (kind, yaml channels, yaml repeats, stride) table at `cfg`'s scale."""
     kind, channels, repeats, stride = table[index]
     return modules[kind](cfg.backbone_width(index, channels), cfg.repeats(repeats), stride, f"layer{index}")
@@ -53,8 +52,8 @@ class Backbone(nn.Module):
     """Image (B, H, W, C) -> (P3, P4, P5) at strides 8, 16, 32: `layer(cfg, i)` for i < depth in
     order, `exchange(i, x)` after each (the Adapter's hook), the `pyramid` layers' outputs."""
 
-    cfg: YoloRDConfig
-    layer: Callable[[YoloRDConfig, int], nn.Module]
+    cfg: Any  # a YoloRDConfig (config.py imports the net to build it, so the net never imports config.py)
+    layer: Callable[[Any, int], nn.Module]
     depth: int
     pyramid: tuple[int, int, int]
 

@@ -16,7 +16,6 @@ import flax.linen as nn
 from ...layers.yolo import YoloConv
 from ...layers.yolo_gelan import ELAN1, SPPELAN, AConv, RepNCSPELAN4
 from .backbone import Backbone
-from .config import YoloRDConfig
 
 # yolov9t.yaml backbone, layers 0-9: (module, args after the input width)
 BACKBONE_V9T = (
@@ -35,7 +34,7 @@ PYRAMID_LAYERS_V9 = (4, 6, 9)  # P3, P4, P5
 GELAN_MODULES = {"conv": YoloConv, "elan1": ELAN1, "aconv": AConv, "repncspelan4": RepNCSPELAN4, "sppelan": SPPELAN}
 
 
-def gelan_layer(cfg: YoloRDConfig, index: int) -> nn.Module:
+def gelan_layer(cfg, index: int) -> nn.Module:
     """yolov9t.yaml line `index` as a module (args in ultralytics' order, input width left out; the
     widths are the YAML's own, so `cfg` is not read)."""
     kind, args = BACKBONE_V9T[index]

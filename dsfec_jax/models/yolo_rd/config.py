@@ -42,9 +42,10 @@ A width is make_divisible(full width x ratio, 8); at ratio 1 it is the full widt
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
+
+from .layout import FUSIONS, MODES, SEARCHABLE, make_divisible, scaled_width
 
 # ultralytics yolov8.yaml `scales`: depth multiple, width multiple, max channels
 SCALES: dict[str, tuple[float, float, int]] = {
@@ -58,9 +59,6 @@ SCALES: dict[str, tuple[float, float, int]] = {
 # tuple is repeated here (data/rd/classes.py RD_CLASSES holds the same names in the same order).
 RADDET_CLASSES = ("person", "bicycle", "car", "motorcycle", "bus", "truck")
 REPRESENTATIONS = {"heat": 3, "gray": 1}  # input name -> channels (pseudo-colour heatmap, grayscale)
-MODES = (1, 2)
-FUSIONS = (1, 2, 3)
-SEARCHABLE = 0  # the fusion 'option' of a one-shot supernet's Exchanger: all three, chosen per step (adapter.py)
 STRIDES = (8, 16, 32)
 BACKBONE_BLOCKS = (0, 1, 1, 2, 2, 3, 3, 4, 4, 4)  # yolov8 backbone layer -> searchable block (stride stage)
 NECK_LEVELS = {12: 1, 15: 0, 16: 1, 18: 1, 19: 2, 21: 2}  # yolov8 neck layer -> pyramid level (P3, P4, P5)
@@ -72,15 +70,6 @@ ARCHS: dict[str, tuple[tuple[str, ...], int]] = {
     "v9": (("t",), 10),  # 0-9: Conv, Conv, ELAN1, AConv, RepNCSPELAN4 x3 with AConv between, SPPELAN
     "v10": (("n",), 11),  # 0-10: yolov8's 0-9 with SCDown at 5 and 7, then PSA
 }
-
-
-def make_divisible(x: float, divisor: int = 8) -> int:
-    return int(math.ceil(x / divisor) * divisor)
-
-
-def scaled_width(full: int, ratio: float) -> int:
-    """A width scaled by an elastic ratio: make_divisible(full x ratio, 8); the full width at 1."""
-    return int(full) if ratio == 1 else make_divisible(full * ratio, 8)
 
 
 # The assigner's small-box rule (below, widened_to): ultralytics 8.4.190's (every GT side under
@@ -191,7 +180,7 @@ class YoloRDConfig:
         return 4 * self.reg_max + self.num_classes
 
     def build(self):
-        from .net import YoloRDNet  # net imports this module
+        from .net import YoloRDNet  # here: the net's modules load only when a network is built
 
         return YoloRDNet(self)
 

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 
 from ...layers.yolo import PaddedConv, YoloConv
 from ...layers.yolo_v10 import YoloDWConv
-from .config import scaled_width
+from .layout import scaled_width
 
 
 def class_bias(num_classes: int, stride: int) -> float:

@@ -6,13 +6,12 @@ YAML ([-1, skip]). neck_v9.py and neck_v10.py give `PanNeck` their own blocks.""
 from __future__ import annotations
 
 import functools
-from typing import Callable
+from typing import Any, Callable
 
 import flax.linen as nn
 import jax.numpy as jnp
 
 from ...layers.yolo import C2f, YoloConv, upsample_nearest
-from .config import YoloRDConfig
 
 
 def _cat(*xs):
@@ -26,8 +25,8 @@ class PanNeck(nn.Module):
     top-down block at P3 (N3), the downsampler from N3, the bottom-up block at P4 (N4), the
     downsampler from N4, the bottom-up block at P5 (N5)."""
 
-    cfg: YoloRDConfig
-    stages: Callable[[YoloRDConfig], tuple[nn.Module, ...]]
+    cfg: Any  # a YoloRDConfig (config.py imports the net to build it, so the net never imports config.py)
+    stages: Callable[[Any], tuple[nn.Module, ...]]
 
     @nn.compact
     def __call__(self, feats, train: bool = False):
@@ -40,7 +39,7 @@ class PanNeck(nn.Module):
         return n3, n4, n5
 
 
-def yolov8_neck_stages(cfg: YoloRDConfig) -> tuple[nn.Module, ...]:
+def yolov8_neck_stages(cfg) -> tuple[nn.Module, ...]:
     w, n = cfg.neck_width, cfg.repeats(3)
     return (C2f(w(12, 512), n, name="layer12"), C2f(w(15, 256), n, name="layer15"),
             YoloConv(w(16, 256), 3, 2, name="layer16"), C2f(w(18, 512), n, name="layer18"),

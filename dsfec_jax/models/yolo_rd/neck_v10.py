@@ -11,11 +11,10 @@ import flax.linen as nn
 
 from ...layers.yolo import C2f, YoloConv
 from ...layers.yolo_v10 import C2fCIB, SCDown
-from .config import YoloRDConfig
 from .neck import PanNeck
 
 
-def v10_neck_stages(cfg: YoloRDConfig) -> tuple[nn.Module, ...]:
+def v10_neck_stages(cfg) -> tuple[nn.Module, ...]:
     w, n = cfg.width, cfg.repeats(3)
     return (C2f(w(512), n, name="layer13"), C2f(w(256), n, name="layer16"), YoloConv(w(256), 3, 2, name="layer17"),
             C2f(w(512), n, name="layer19"), SCDown(w(512), 3, 2, name="layer20"),

@@ -10,11 +10,10 @@ import functools
 import flax.linen as nn
 
 from ...layers.yolo_gelan import AConv, RepNCSPELAN4
-from .config import YoloRDConfig
 from .neck import PanNeck
 
 
-def gelan_neck_stages(cfg: YoloRDConfig) -> tuple[nn.Module, ...]:
+def gelan_neck_stages(cfg) -> tuple[nn.Module, ...]:
     """yolov9t.yaml's widths are written out (no scale multipliers), so `cfg` is not read."""
     return (RepNCSPELAN4(96, 96, 48, 3, name="layer12"), RepNCSPELAN4(64, 64, 32, 3, name="layer15"),
             AConv(48, name="layer16"), RepNCSPELAN4(96, 96, 48, 3, name="layer18"), AConv(64, name="layer19"),

@@ -14,18 +14,19 @@ the other (and, gamma = alpha = 0 at init, the two then compute the same outputs
 
 from __future__ import annotations
 
+from typing import Any
+
 import flax.linen as nn
 
 from .adapter import Adapter
 from .architectures import build_parts
-from .config import YoloRDConfig
 
 SHARED_SUBTREES = ("backbone", "neck", "head")
 STRIDE = 32  # the largest stride
 
 
 class YoloRDNet(nn.Module):
-    cfg: YoloRDConfig
+    cfg: Any  # a YoloRDConfig (config.py imports this module to build the net, so it is not imported here)
 
     def setup(self):
         c = self.cfg
