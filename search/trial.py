@@ -9,11 +9,10 @@ import traceback
 from pathlib import Path
 
 from dsfec_jax import zoo
-from dsfec_jax.data.points.sources import load_frames
 from dsfec_jax.core.environment import environment
 from dsfec_jax.profile.records import profile
 from dsfec_jax.core.provenance import jsonable
-from dsfec_jax.modalities.points.fit import fit
+from dsfec_jax.modalities.registry import modality_of
 
 from . import significance
 from .inherit import describe, initial_variables, source_weights
@@ -117,25 +116,19 @@ def measured(scores: dict, tables: dict, costs: dict) -> dict:
     return out
 
 
-def load_data(family, data: str, split: str, count: int):
-    """The frames (point families) or RD samples (range-Doppler ones) a trial trains or validates on."""
-    if family.modality == "rd":
-        from dsfec_jax.data.rd.sources import load_rd_samples
-        return load_rd_samples(data, split, count, seed=0)
-    return load_frames(data, split, count, seed=0, features=family.points.input_columns)
-
-
 def _fit_trial(trial: dict, trial_dir: Path) -> dict:
-    """Train (or resume) the trial's run -> its final validation scores, match tables included."""
+    """Train (or resume) the trial's run -> its final validation scores, match tables included:
+    the samples and the fit of the config's modality (whatever it reads)."""
     recipe = get_recipe(trial["recipe"], trial["base"])
-    family = zoo.family_of(trial["base"])
     overrides = {**trial["overrides"], **recipe.model_overrides()}
-    frames, val = (load_data(family, trial["data"], split, n) for split, n in
+    cfg = zoo.config(trial["base"], **overrides)
+    family, modality = zoo.family_of(cfg), modality_of(cfg)
+    frames, val = (modality.load_samples(family, trial["data"], split, n, 0) for split, n in
                    (("train", recipe.train_frames), ("val", recipe.val_frames)))
-    return fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
-               window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
-               init_variables=initial_variables(trial.get("init", "scratch")),
-               match_classes=match_classes(family))[2]
+    return modality.fit(cfg, frames, val, recipe.schedule, trial_dir, trial["seed"],
+                        run_info={"trial": jsonable(trial)}, progress=False,
+                        init_variables=initial_variables(trial.get("init", "scratch")), overrides=overrides,
+                        match_classes=match_classes(family), **recipe.fit_options())[2]
 
 
 def measure(trial: dict, trial_dir: Path) -> dict:
