@@ -171,12 +171,12 @@ def parse(argv=None) -> argparse.Namespace:
 
 
 def model_config(name: str):
-    """The registered config of --model, or exit listing the registered names."""
+    """The registered config of --model (before --set), or exit listing the registered names."""
     from . import zoo
 
     if name not in zoo.REGISTRY:
         sys.exit(f"--model {name!r}: not a zoo model; available: {', '.join(zoo.available())}")
-    return zoo.config(name)
+    return zoo.REGISTRY[name]
 
 
 def resolved(args):

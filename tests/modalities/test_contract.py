@@ -6,6 +6,7 @@ record points at another modality's samples, predictor or protocol fails here.""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -57,3 +58,28 @@ def test_a_protocol_fed_another_modality_s_samples_fails():
     with pytest.raises((AttributeError, TypeError, ValueError)):
         protocol("camera_voc").validate(predictor, frames)
 
+
+
+def test_a_search_trial_trains_on_its_modality_s_samples(monkeypatch, tmp_path):
+    """A trial of a camera model (the family has no recipe yet: one is stubbed in) loads street
+    images and calls the image modality's fit; it used to fall through to point frames."""
+    from search import recipes, trial
+
+    from dsfec_jax.data.camera.images import CameraImage
+    from dsfec_jax.train.schedules import get_schedule
+
+    seen = {}
+
+    def fit(cfg, samples, val, schedule, run_dir, seed, **options):
+        seen.update(model=cfg.name, samples=list(samples), val=list(val), options=options)
+        return None, None, {"mAP50": 1.0}
+
+    monkeypatch.setitem(MODALITIES, "image", dataclasses.replace(MODALITIES["image"], fit=fit))
+    recipe = recipes.Recipe("tiny", get_schedule("yolo3_quick"), train_frames=2, val_frames=1, grid=None,
+                            max_pillars=None, window=None, latency_repeats=1, supernet_steps=None, light_profile=True)
+    monkeypatch.setitem(recipes.RECIPES, "camera", {"tiny": recipe})
+    spec = {"base": "shuffle_yolov3", "label": "base", "overrides": {}, "recipe": "tiny", "data": "street", "seed": 0}
+    assert trial._fit_trial(spec, tmp_path) == {"mAP50": 1.0}
+    assert seen["model"] == "shuffle_yolov3" and len(seen["samples"]) == 2 and len(seen["val"]) == 1
+    assert all(isinstance(s, CameraImage) for s in seen["samples"] + seen["val"])
+    assert "window" not in seen["options"]  # the point families' option only

@@ -15,13 +15,13 @@ through the Modality record; the shared flags read:
   renamed into the data's classes (data/camera/sources.class_map: same name, or pedestrian <->
   person and cyclist <-> bicycle) and only the classes both know are scored.
 - `--schedule quick|paper` is the family's profile (yolo3_quick / yolo3_paper, train/schedules.py)
-  with its multi-scale sizes (train/fit_camera.MULTI_SCALE); `--sizes LOW,HIGH` (or one size)
+  with its multi-scale sizes (modalities/image/fit.MULTI_SCALE); `--sizes LOW,HIGH` (or one size)
   overrides them. Validation, eval and predict letterbox each image to `--size` (416) on its long side.
 - eval / predict keep detections down to darknet's mAP threshold (0.005) unless --score-threshold
   says otherwise; predict writes COCO JSON (results list, and with --gt-out the ground truth; image
   pixels) and with --png-dir one PNG per image (ground truth in class colours, predictions scoring
   >= 0.25 in magenta).
-- `dsfec export` writes the network and the YOLOv3 decode (deploy/export_camera.py) at one letterboxed
+- `dsfec export` writes the network and the YOLOv3 decode (modalities/image/export.py) at one letterboxed
   size: `--size S` the street frames' rectangle at long side S (default 416: 256 x 416), or
   `--input-hw H,W` any (multiples of 32; a square takes images of every shape, letterboxed as
   darknet does). The classes are those of the run that made --weights, as for eval.
@@ -49,7 +49,7 @@ from .predict import CameraPredictor
 READS = "whole camera images"
 EVAL_SIZE = 416  # eval / predict: the long side images are letterboxed to (the paper's 416)
 TRAIN_FRAMES = 1000  # street frames generated for training without --frames (~10 frames/s per core)
-PNG_MIN_SCORE = 0.25  # predictions drawn on a PNG (ultralytics' predict default, as cli_rd's)
+PNG_MIN_SCORE = 0.25  # predictions drawn on a PNG (ultralytics' predict default, as modalities/rd/cli.py's)
 CLASS_FIELDS = CAMERA.weight_fields  # num_classes, class_names: set from the training data
 SYNONYMS = {"synthetic": "street"}  # the commands' default --data is the family's embedded benchmark
 
