@@ -21,7 +21,7 @@ from conftest import random_variables
 from dsfec_jax import cli, zoo
 from dsfec_jax.data.camera.batches import eval_input
 from dsfec_jax.data.camera.sources import load_camera_images
-from dsfec_jax.deploy import OrtCameraPredictor
+from dsfec_jax.modalities.image.ort import OrtCameraPredictor
 from dsfec_jax.modalities.image import export as export_camera, quantize as quantize_camera
 from dsfec_jax.deploy.bench import timing
 from dsfec_jax.deploy.bench.model_setup import measured_batch_stats

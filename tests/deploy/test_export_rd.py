@@ -13,7 +13,7 @@ from conftest import random_variables
 from dsfec_jax import zoo
 from dsfec_jax.data.rd.representations import RDRepresentation, representations
 from dsfec_jax.data.rd.sources import load_rd_samples
-from dsfec_jax.deploy import OrtRDPredictor
+from dsfec_jax.modalities.rd.ort import OrtRDPredictor
 from dsfec_jax.modalities.rd import export as export_rd, quantize as quantize_rd
 from dsfec_jax.modalities.rd.bench import compiled_postprocess
 from dsfec_jax.modalities.rd.export import decoded_network
