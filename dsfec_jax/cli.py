@@ -11,9 +11,9 @@ thin commands over the library, the same flags for every family.
     dsfec eval    --model shuffle_yolov3 --weights runs/sy3/checkpoints/best.msgpack --data voc:DIR --split all
     dsfec export  --model shuffle_yolov3 --weights runs/sy3/checkpoints/best.msgpack --out exports/sy3 [--size 416]
 
-Each command asks the model's family what it reads (zoo.family_of(name).modality) and hands
-range-Doppler models to cli_rd and camera models to cli_camera, where their readings of the shared
-flags are documented.
+Each command resolves the model's config once (--model, --set and the fields the modality's flags
+or data decide), then hands it to the verb of the config's Modality record (modalities/registry):
+modalities/<points|rd|image>/cli.py, where their readings of the shared flags are documented.
 """
 
 from __future__ import annotations
@@ -26,9 +26,7 @@ from pathlib import Path
 
 from .argtypes import command_line, non_negative_int, positive_int
 from .cli_edge import EDGE_COMMANDS, add_commands as add_edge_commands
-from .core.defaults import RUN_PILLARS
-
-POINT_SCORE_THRESHOLD = 0.05  # eval/predict of point-cloud models (RD models: cli_rd, the paper's 0.001)
+from .core.defaults import POINT_SCORE_THRESHOLD, RUN_PILLARS
 
 INFER_BENCH_MODELS = "baseline,dsfec_l,dsfec_m,dsfec_s"
 TRAIN_BENCH_MODELS = "dsfec_s,dsfec_l,radarnext_fpn"  # the issue-20 acceptance models; 'all' for every variant
@@ -172,34 +170,28 @@ def parse(argv=None) -> argparse.Namespace:
     return args
 
 
-def model_family(name: str):
-    """The zoo family of --model, or exit listing the registered names."""
+def model_config(name: str):
+    """The registered config of --model (before --set), or exit listing the registered names."""
     from . import zoo
 
     if name not in zoo.REGISTRY:
         sys.exit(f"--model {name!r}: not a zoo model; available: {', '.join(zoo.available())}")
-    return zoo.family_of(name)
+    return zoo.REGISTRY[name]
 
 
-def is_rd(name: str) -> bool:
-    """Whether --model reads range-Doppler maps (its commands are cli_rd's)."""
-    return model_family(name).modality == "rd"
-
-
-def is_camera(name: str) -> bool:
-    """Whether --model reads camera images (its commands are cli_camera's)."""
-    return model_family(name).modality == "image"
-
-
-def checked_overrides(name: str, overrides: dict) -> dict:
-    """--set (and the flags that set config fields), validated against the model's config."""
+def resolved(args):
+    """(modality, config, overrides) of --model: the modality refuses the flags it does not take,
+    then the config is resolved once from --set and the fields the flags or the data decide."""
     from . import zoo
+    from .modalities.registry import modality_of
 
+    modality = modality_of(model_config(args.model))
+    modality.commands.refuse(args, args.command)
+    overrides = modality.commands.config_fields(args, parse_overrides(args.set))
     try:
-        zoo.config(name, **overrides)
+        return modality, zoo.config(args.model, **overrides), overrides
     except (TypeError, ValueError) as err:
         sys.exit(f"--set: {err}")
-    return overrides
 
 
 def schedule_preset(profile: str, family) -> str:
@@ -235,100 +227,23 @@ def training_schedule(args, family):
 
 
 def run_train(args) -> int:
-    from .data.points.sources import NoFrames, load_frames
-    from .modalities.points.fit import fit
-    from .train.loop import RunMismatch
-
     from . import zoo
 
-    family = model_family(args.model)
-    sched = training_schedule(args, family)
+    modality, cfg, overrides = resolved(args)
+    sched = training_schedule(args, zoo.family_of(cfg))
     info = {"command": command_line(args),
             "data": {"source": args.data, "split": args.split}}
-    if family.modality == "image":  # classes come from the data, so the overrides are checked there
-        from .modalities.image import cli as cli_camera
-        return cli_camera.train(args, parse_overrides(args.set), sched, info)
-    if args.sizes or args.size:
-        sys.exit(f"dsfec train: --sizes and --size apply to camera models; {args.model!r} is a "
-                 f"{family.modality!r} model")
-    if family.modality == "rd":
-        from .modalities.rd import cli as cli_rd
-        return cli_rd.train(args, checked_overrides(args.model, parse_overrides(args.set)), sched, info)
-    overrides = checked_overrides(args.model, {"max_pillars": args.max_pillars or RUN_PILLARS,
-                                               **parse_overrides(args.set)})
-    features = zoo.input_columns(args.model)
-    window = 96 if args.window is None else args.window
-    try:  # an empty split, or a run directory started with another setup: the user's to fix
-        frames = load_frames(args.data, args.split, args.frames or (sched.batch_size * 100), args.seed,
-                             features=features)
-        val = load_frames(args.data, "val", args.val_frames, args.seed, features=features)
-        _, _, final = fit(args.model, overrides, frames, val, sched, args.run_dir, args.seed, args.steps,
-                          window or None, not args.no_augment, args.eval_every, info,
-                          window_sampling=args.window_sampling or "cycle")
-    except (NoFrames, RunMismatch) as err:
-        sys.exit(f"dsfec train: {err}")
+    final = modality.commands.train(args, cfg, overrides, sched, info)
     print(json.dumps({"run_dir": str(args.run_dir), "final": final}))
     return 0
 
 
 def run_eval_or_predict(args) -> int:
-    from . import zoo
-    from .data.points.sources import NoFrames, load_frames
     from .cli_report import print_scores
-    from .modalities.points.evaluate import predict_frames
 
-    if is_camera(args.model):  # classes come from the weights' run, so the overrides are checked there
-        from .modalities.image import cli as cli_camera
-        return cli_camera.eval_or_predict(args, parse_overrides(args.set))
-    if args.size is not None:
-        sys.exit(f"dsfec {args.command}: --size applies to camera models; {args.model!r} is not one")
-    if is_rd(args.model):
-        from .modalities.rd import cli as cli_rd
-        return cli_rd.eval_or_predict(args, checked_overrides(args.model, parse_overrides(args.set)))
-    threshold = POINT_SCORE_THRESHOLD if args.score_threshold is None else args.score_threshold
-    if args.runtime == "onnx":
-        from .modalities.points.ort import OrtPredictor
-        if not args.onnx:
-            sys.exit("--runtime onnx needs --onnx DIR (written by `dsfec export --model NAME --out DIR`)")
-        predictor = OrtPredictor(args.onnx, score_threshold=threshold)
-        if predictor.manifest["model"] != args.model:
-            sys.exit(f"{args.onnx}: holds {predictor.manifest['model']!r}, not --model {args.model!r}")
-    else:
-        overrides = checked_overrides(args.model, {"max_pillars": args.max_pillars or RUN_PILLARS,
-                                                   **parse_overrides(args.set)})
-        try:
-            predictor = zoo.load(args.model, weights=args.weights,
-                                 predictor_options={"score_threshold": threshold}, **overrides)
-        except FileNotFoundError as err:
-            sys.exit(f"dsfec {args.command}: {err} (--weights)")
-    try:
-        frames = load_frames(args.data, args.split, args.frames, args.seed, features=zoo.input_columns(args.model))
-    except NoFrames as err:
-        sys.exit(f"dsfec {args.command}: {err}")
-    detections = predict_frames(predictor, frames)
-    if args.command == "predict":
-        write_predictions(args, frames, detections, predictor)
-    return print_scores(args, frames, detections, predictor, "frames")
-
-
-def write_predictions(args, frames, detections, predictor) -> None:
-    from .metrics.submission import boxes_to_entries, write_submission
-
-    results = {token: boxes_to_entries(token, d.boxes, d.scores) for token, d in detections.items()}
-    write_submission(args.out, results)
-    if args.gt_out:
-        from .modalities.points.evaluate import in_grid
-        grid = predictor.spec.grid  # the boxes the metric scores: those on the model's grid
-        gt = {f.frame_id: boxes_to_entries(f.frame_id, in_grid(f.boxes, grid)) for f in (frames[i] for i in range(len(frames)))}
-        write_submission(args.gt_out, gt, is_gt=True)
-    if args.png_dir:
-        from .data.points.synthetic.bev_png import save_bev_png
-        for i in range(len(frames)):
-            f = frames[i]
-            safe = f.frame_id.replace("/", "_") or f"frame_{i:06d}"
-            found = detections[f.frame_id]
-            shown = found.boxes if args.png_min_score is None else found.boxes[found.scores >= args.png_min_score]
-            save_bev_png(f, Path(args.png_dir) / f"{safe}.png", predictor.spec.grid, predicted=shown)
+    modality, cfg, _ = resolved(args)
+    items, detections, predictor, extra = modality.commands.eval_or_predict(args, cfg)
+    return print_scores(args, items, detections, predictor, f"{modality.noun}s", **extra)
 
 
 def ship_source(args) -> tuple[Path, dict]:
@@ -350,33 +265,31 @@ def ship_source(args) -> tuple[Path, dict]:
     return source, info
 
 
-def ship_point_predictor(model: str, source: Path, info: dict):
-    from . import zoo
-    from .modalities.points.predict import Predictor
+def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
+    """What a weights manifest records: the family's protocol on `frames` items of `split` of its
+    embedded synthetic benchmark (data seed 0), the keys its protocol keeps."""
+    from .modalities.registry import modality_named, protocol
 
-    # measure with the pillar slots the run validated with (RadarNeXt runs set their own)
-    max_pillars = info.get("overrides", {}).get("max_pillars", RUN_PILLARS)
-    det = zoo.create(model, max_pillars=max_pillars)
-    variables = zoo.model_variables(det, source)
-    return Predictor(det, variables, score_threshold=POINT_SCORE_THRESHOLD), variables
+    data = modality_named(family.modality).load_samples(family, family.benchmark, split, frames, 0)
+    scores, _ = protocol(family.metric.name).validate(predictor, data)
+    return {k: scores[k] for k in family.metric.keep} | {
+        "frames": frames, "data_seed": 0, "data": family.benchmark, "protocol": family.metric.name}
 
 
 def run_ship(args) -> int:
     from . import zoo
     from .core import checkpoint
     from .core.provenance import versions
-    from .modalities.points.evaluate import measure_benchmark
+    from .modalities.registry import modality_of
 
-    family = model_family(args.model)
+    modality = modality_of(model_config(args.model))
     source, info = ship_source(args)
-    if family.modality == "rd":
-        from .modalities.rd import cli as cli_rd
-        predictor, variables = cli_rd.ship_predictor(args.model, source, info)
-    elif family.modality == "image":
-        from .modalities.image import cli as cli_camera
-        predictor, variables = cli_camera.ship_predictor(args.model, source, info)
-    else:
-        predictor, variables = ship_point_predictor(args.model, source, info)
+    try:  # the config the run trained
+        cfg = zoo.config(args.model, **info.get("overrides", {}))
+    except (TypeError, ValueError) as err:
+        sys.exit(f"dsfec ship: {Path(args.run_dir) / 'run.json'} overrides: {err}")
+    predictor, variables = modality.commands.ship_predictor(cfg, source, info)
+    family = zoo.family_of(cfg)
     measured = {split: measure_benchmark(predictor, family, split, args.frames) for split in ("val", "test")}
     manifest = {"model": args.model, "source_checkpoint": str(source),
                 "step": checkpoint.read_manifest(source).get("step"), "training": info,
@@ -389,56 +302,32 @@ def run_ship(args) -> int:
 
 
 def run_export(args) -> int:
-    from . import zoo
-    from .modalities.points.export import export
-
-    if is_camera(args.model):
-        from .modalities.image import cli as cli_camera
-        return cli_camera.export(args, parse_overrides(args.set), command_line(args))
-    if args.size:
-        sys.exit(f"dsfec export: --size applies to camera models; {args.model!r} is not one")
-    if is_rd(args.model):
-        from .modalities.rd import cli as cli_rd
-        return cli_rd.export(args, checked_overrides(args.model, parse_overrides(args.set)), command_line(args))
-    if args.input_hw:
-        sys.exit(f"dsfec export: --input-hw applies to range-Doppler models; {args.model!r} reads point clouds")
-    det = zoo.create(args.model, **checked_overrides(args.model, {"max_pillars": args.max_pillars or RUN_PILLARS,
-                                                                   **parse_overrides(args.set)}))
-    path = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
-    if not path.is_file():
-        sys.exit(f"no weights at {path}: pass --weights (a trained checkpoint or weights file)")
-    variables = zoo.model_variables(det, path)
-    out = export(det, variables, args.out, top_k=args.top_k or 100,
-                 source={"weights": str(path), "command": command_line(args)})
+    modality, cfg, _ = resolved(args)
+    out = modality.commands.export(args, cfg, command_line(args))
     print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))
     return 0
 
 
-def exported_modality(export_dir: str) -> str:
-    """What an export directory's model reads: its deploy.json's "modality" (range-Doppler exports
-    write 'rd', camera exports 'image'; point exports predate the field)."""
+def exported_modality(export_dir: str):
+    """The Modality record of an export directory's model: its deploy.json's "modality" (range-Doppler
+    exports write 'rd', camera exports 'image'; point exports predate the field: 'points')."""
+    from .modalities.registry import modality_named
+
     manifest = Path(export_dir) / "deploy.json"
     if not manifest.is_file():
         sys.exit(f"--onnx {export_dir}: no deploy.json; expected a directory written by `dsfec export`")
     try:
-        return json.loads(manifest.read_text()).get("modality", "points")
+        name = json.loads(manifest.read_text()).get("modality", "points")
     except (json.JSONDecodeError, AttributeError):
         sys.exit(f"--onnx {export_dir}: {manifest} is not a deploy.json object written by `dsfec export`")
+    try:
+        return modality_named(name)
+    except KeyError as err:
+        sys.exit(f"--onnx {export_dir}: {manifest}: {err.args[0]}")
 
 
 def run_quantize(args) -> int:
-    modality = exported_modality(args.onnx)
-    if modality == "rd":
-        from .modalities.rd import cli as cli_rd
-        return cli_rd.quantize(args)
-    if modality == "image":
-        from .modalities.image import cli as cli_camera
-        return cli_camera.quantize(args)
-    from .data.points.sources import load_frames
-    from .modalities.points.quantize import quantize
-
-    out = quantize(args.onnx, args.out, load_frames("synthetic", "train", args.calib_frames, args.seed),
-                   calibration=args.calibration)
+    out = exported_modality(args.onnx).commands.quantize(args)
     print(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in out.items()}, indent=2))
     return 0
 

@@ -181,7 +181,7 @@ def gps_track(args, drive_gps=None):
 
 
 def run_edge_command(args) -> int:
-    from . import zoo
+    from . import api
     from .edge.frames import drive_frames, folder_frames
     from .edge.pipeline import EdgePipeline
     from .edge.run import run_edge
@@ -200,7 +200,7 @@ def run_edge_command(args) -> int:
             track, report = gps_track(args, drive.gps)
             info["drive"] = {"split": "test", "index": args.drive, "seed": args.seed, "frames": args.drive_frames}
         depth = depth_source(args, args.baseline or baseline or 0.54)
-        detect = zoo.load(args.model, weights=args.weights,
+        detect = api.load(args.model, weights=args.weights,
                           predictor_options={"score_threshold": args.score_threshold})
     except (FileNotFoundError, ValueError) as err:
         sys.exit(f"dsfec edge: {err}")

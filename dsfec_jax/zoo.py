@@ -1,4 +1,4 @@
-"""The model zoo: one registry of named variants and the stable public API.
+"""The model zoo: the registry of named variants, their configs, detectors and weights files.
 
     >>> from dsfec_jax import zoo
     >>> zoo.available("dsfec")
@@ -11,8 +11,8 @@
     >>> depth = zoo.create_auxiliary("monodepth_street")
     >>> variables = zoo.model_variables(depth, zoo.shipped_weights("monodepth_street"))
 
-It sits above `models/` (not inside it) because later it also assembles predictors from
-weights, pillarization and box decoding, which models must not import.
+It sits above `models/` and imports nothing above them (models, core): a ready predictor of
+trained weights is `dsfec_jax.api.load`, which asks the model's modality for it.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ def available(family: str | None = None, modality: str | None = None) -> list[st
     if modality is not None and modality not in MODALITIES:
         raise KeyError(f"unknown modality {modality!r}; modalities: {MODALITIES}")
     names = REGISTRY if family is None else FAMILIES[family].variants
-    return sorted(n for n in names if modality is None or family_of(n).modality == modality)
+    return sorted(n for n in names if modality is None or family_of(n).reads(modality))
 
 
 def family_of(cfg_or_name) -> Family:
@@ -58,17 +58,6 @@ def family_of(cfg_or_name) -> Family:
         if type(cfg) is family.config_class:
             return family
     raise TypeError(f"{type(cfg).__name__} belongs to no registered family; families: {sorted(FAMILIES)}")
-
-
-def require_modality(cfg_or_name, modality: str, what: str) -> Family:
-    """The family of a config or name, when it reads `modality`; else a ValueError saying which
-    `what` (a command or function) handles only that modality."""
-    family = family_of(cfg_or_name)
-    if family.modality != modality:
-        name = cfg_or_name if isinstance(cfg_or_name, str) else cfg_or_name.name
-        raise ValueError(f"{what} handles {modality!r} models; {name!r} is a {family.modality!r} model "
-                         f"(family {family.name!r})")
-    return family
 
 
 def config(name: str, /, **overrides):
@@ -282,6 +271,24 @@ def auxiliary_config(path: str | Path, kind: str):
         raise ValueError(f"{path}: its training record's config: {err}") from err
 
 
+def overrides_of(cfg) -> dict:
+    """The fields of `cfg` that differ from its registered variant's (`cfg.name`): what
+    `config(cfg.name, **overrides_of(cfg))` needs to give `cfg` back."""
+    base = config(cfg.name)
+    return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg) if getattr(cfg, f.name) != getattr(base, f.name)}
+
+
+def trained_detector(cfg, weights: str | Path | None = None) -> tuple[Detector, dict]:
+    """The detector of `cfg` and its variables from `weights` (a weights file or checkpoint; default
+    the shipped weights of `cfg.name`); FileNotFoundError saying how to get weights when none are there."""
+    path = Path(weights) if weights else shipped_weights(cfg.name)
+    detector = Detector(cfg)
+    if not path.is_file():
+        raise FileNotFoundError(f"no weights at {path}" + ("" if weights else f": {cfg.name!r} ships no weights yet; "
+                                f"train with `dsfec train --model {cfg.name}` and pass --weights"))
+    return detector, model_variables(detector, path)
+
+
 def trained_fields(path: str | Path, fields) -> dict:
     """The values of config `fields` in the training record of a weights file: its manifest's
     "training" (shipped weights, `dsfec ship`), else the run.json of the run directory a checkpoint
@@ -301,25 +308,3 @@ def trained_fields(path: str | Path, fields) -> dict:
         if found:
             return {k: tuple(v) if isinstance(v, list) else v for k, v in found.items()}
     return {}
-
-
-def load(name: str, /, weights: str | Path | None = None, predictor_options: dict | None = None, **overrides):
-    """A ready predictor: `zoo.load("dsfec_s")(points) -> Detections`, `zoo.load("yolov8n")(rd_sample)
-    -> Boxes2D`, `zoo.load("shuffle_yolov3")(image) -> Boxes2D` (shipped weights by default)."""
-    from .modalities.points.predict import predictor_for
-
-    path = Path(weights) if weights else shipped_weights(name)
-    # fields the training data set (the camera family's classes) come from the weights' run unless given
-    detector = create(name, **{**trained_fields(path, family_of(name).weight_fields), **overrides})
-    if not path.is_file():
-        raise FileNotFoundError(f"no weights at {path}" + ("" if weights else f": {name!r} ships no weights yet; "
-                                f"train with `dsfec train --model {name}` and pass --weights"))
-    variables = model_variables(detector, path)
-    modality = family_of(detector.config).modality
-    if modality == "rd":
-        from .modalities.rd.predict import RDPredictor
-        return RDPredictor(detector, variables, **(predictor_options or {}))
-    if modality == "image":
-        from .modalities.image.predict import CameraPredictor
-        return CameraPredictor(detector, variables, **(predictor_options or {}))
-    return predictor_for(detector, variables, **(predictor_options or {}))

@@ -41,8 +41,8 @@ from dsfec_jax.data.camera.images import CameraImage
 from dsfec_jax.data.camera.sources import class_map, load_camera_images, source_classes
 from dsfec_jax.modalities.image.evaluate import evaluate_camera
 from dsfec_jax.models.camera.family import FAMILY as CAMERA
-from dsfec_jax.modalities.image.predict import CameraPredictor
 from dsfec_jax.modalities.image.fit import bn_recalibration, fit_camera
+from dsfec_jax.modalities.image.predict import CameraPredictor
 from dsfec_jax.train.schedules import get_schedule
 
 from experiments.common import fmt
@@ -81,8 +81,8 @@ def fine_tune(det, overrides: dict, variables: dict, tune: list[CameraImage], ar
     """Variables after `args.steps` steps on the tune images (BN re-estimated on them)."""
     schedule = get_schedule("yolo3_quick", learning_rate=args.lr, warmup_steps=min(30, args.steps // 5),
                             steps=args.steps, batch_size=args.batch_size)
-    _, state, _ = fit_camera(det.name, overrides, tune, tune[:args.batch_size], schedule, Path(args.out) / "run", seed=args.seed,
-                             eval_every=0, init_variables=variables, sizes=MultiScale((args.size,)),
+    _, state, _ = fit_camera(det.config, tune, tune[:args.batch_size], schedule, Path(args.out) / "run", seed=args.seed,
+                             eval_every=0, overrides=overrides, init_variables=variables, sizes=MultiScale((args.size,)),
                              eval_size=args.size, progress=not args.no_progress,
                              run_info={"command": command_line(), "experiment": "camera_voc_finetune"})
     return {"params": state["params"], "batch_stats": state["batch_stats"]}

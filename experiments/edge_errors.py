@@ -85,7 +85,7 @@ def frame_rows(frame, dets, pairs, depth_maps, ego_states, collectors, reference
 
 
 def measure(args) -> dict:
-    from dsfec_jax import zoo
+    from dsfec_jax import api, zoo
     from dsfec_jax.cli_edge import DEPTH_MODEL
     from dsfec_jax.data.camera.street import StreetConfig, generate_drive
     from dsfec_jax.edge.depth_sources import NetworkDepth
@@ -97,7 +97,7 @@ def measure(args) -> dict:
 
     cfg = StreetConfig()
     drive = generate_drive(cfg, "test", args.drive, args.seed, args.frames)
-    detect = zoo.load("shuffle_yolov3", predictor_options={"score_threshold": SCORE})
+    detect = api.load("shuffle_yolov3", predictor_options={"score_threshold": SCORE})
     network = NetworkDepth(load_depth_predictor(args.depth_weights or zoo.shipped_weights(DEPTH_MODEL)), cfg.baseline_m)
     fixes, report = clean_fixes(GpsFixes.from_track(drive.gps, source="drive GPS"))
     track = EgoTrack(fixes, origin=cfg.origin)  # the world's ENU frame, so truth and placement compare directly

@@ -33,7 +33,7 @@ from dsfec_jax.data.batches import BatchStream, collate
 from dsfec_jax.data.prefetch import Prefetcher
 from dsfec_jax.data.points.pillarize import PillarSpec, pillar_budget
 from dsfec_jax.data.points.sources import load_frames
-from dsfec_jax.modalities.points.evaluate import validate
+from dsfec_jax.modalities.registry import protocol
 from dsfec_jax.modalities.points.predict import Predictor
 from dsfec_jax.modalities.registry import modality_of
 from dsfec_jax.profile.records import profile
@@ -196,7 +196,7 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
             stats = recalibrate({"params": state["params"], "batch_stats": state["batch_stats"]}, calib, depth)
         predictor.variables, predictor.depth = {"params": state["params"], "batch_stats": stats}, depth
         with _timed(phases, "validate"):
-            scores, tables = validate(family.metric.name, predictor, val, match_classes(family))
+            scores, tables = protocol(family.metric.name).validate(predictor, val, match_classes(family))
         with _timed(phases, "profile"):
             costs = measured_costs(journal, trial) or profile(
                 [zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats, warmup=1,

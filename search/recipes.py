@@ -44,6 +44,11 @@ class Recipe:
             out["grid"] = self.grid
         return out
 
+    def fit_options(self) -> dict:
+        """The modality's own options of its fit: the point families' training windows (None:
+        the whole grid); nothing for the others (max_pillars None: not a point-cloud family)."""
+        return {} if self.max_pillars is None else {"window": self.window}
+
 
 def build(name: str, spec: SearchRecipe, data: str) -> Recipe:
     """A family's recipe data -> the Recipe a trial runs (its schedule built from train.schedules)."""

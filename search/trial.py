@@ -10,10 +10,8 @@ from pathlib import Path
 
 from dsfec_jax import zoo
 from dsfec_jax.core.environment import environment
-from dsfec_jax.modalities.registry import modality_of
 from dsfec_jax.profile.records import profile
 from dsfec_jax.core.provenance import jsonable
-from dsfec_jax.modalities.points.fit import fit
 from dsfec_jax.modalities.registry import modality_of
 
 from . import significance
@@ -118,23 +116,24 @@ def measured(scores: dict, tables: dict, costs: dict) -> dict:
     return out
 
 
-def load_data(base: str, data: str, split: str, count: int):
-    """The samples a trial of model `base` trains or validates on, as its modality loads them
-    (point frames, RD samples, camera images)."""
-    return modality_of(base).load_samples(zoo.family_of(base), data, split, count, 0)
+def load_data(model, data: str, split: str, count: int):
+    """The samples a trial of `model` (a config or a registered name) trains or validates on, as
+    its modality loads them (point frames, RD samples, camera images)."""
+    return modality_of(model).load_samples(zoo.family_of(model), data, split, count, 0)
 
 
 def _fit_trial(trial: dict, trial_dir: Path) -> dict:
-    """Train (or resume) the trial's run -> its final validation scores, match tables included."""
+    """Train (or resume) the trial's run -> its final validation scores, match tables included:
+    the samples and the fit of the config's modality (whatever it reads)."""
     recipe = get_recipe(trial["recipe"], trial["base"])
-    family = zoo.family_of(trial["base"])
     overrides = {**trial["overrides"], **recipe.model_overrides()}
-    frames, val = (load_data(trial["base"], trial["data"], split, n) for split, n in
+    cfg = zoo.config(trial["base"], **overrides)
+    frames, val = (load_data(cfg, trial["data"], split, n) for split, n in
                    (("train", recipe.train_frames), ("val", recipe.val_frames)))
-    return fit(trial["base"], overrides, frames, val, recipe.schedule, trial_dir, trial["seed"],
-               window=recipe.window, run_info={"trial": jsonable(trial)}, progress=False,
-               init_variables=initial_variables(trial.get("init", "scratch")),
-               match_classes=match_classes(family))[2]
+    return modality_of(cfg).fit(cfg, frames, val, recipe.schedule, trial_dir, trial["seed"],
+                        run_info={"trial": jsonable(trial)}, progress=False,
+                        init_variables=initial_variables(trial.get("init", "scratch")), overrides=overrides,
+                        match_classes=match_classes(zoo.family_of(cfg)), **recipe.fit_options())[2]
 
 
 def measure(trial: dict, trial_dir: Path) -> dict:

@@ -3,7 +3,7 @@ import json
 import numpy as np
 import pytest
 
-from dsfec_jax import cli, zoo
+from dsfec_jax import api, cli, zoo
 from dsfec_jax.metrics import nuscenes, submission
 from conftest import tiny
 
@@ -56,7 +56,7 @@ def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
     capsys.readouterr()
     manifest = json.loads((shipped / "tiny_s.msgpack.json").read_text())
     assert manifest["step"] == 3 and manifest["training"]["seed"] == 0 and "car_mAP" in manifest["measured"]["test"]
-    detections = zoo.load(tiny_model, weights=shipped / "tiny_s.msgpack", max_pillars=96)(
+    detections = api.load(tiny_model, weights=shipped / "tiny_s.msgpack", max_pillars=96)(
         np.zeros((5, 7), np.float32))
     assert len(detections.boxes) == len(detections.scores)
 
@@ -85,7 +85,7 @@ def test_ship_measures_a_radarnext_run_with_the_vod_protocol(monkeypatch, tmp_pa
 
 def test_load_without_shipped_weights_says_how_to_get_them(tiny_model):
     with pytest.raises(FileNotFoundError, match="dsfec train --model tiny_s"):
-        zoo.load(tiny_model)
+        api.load(tiny_model)
 
 
 def test_overrides_parse_literals():
@@ -152,9 +152,9 @@ def test_empty_inputs_get_an_error_not_a_number(shared_data, tiny_model, tmp_pat
         cli.main(["eval", "--model", "dsfec_s", "--data", vod, "--split", "test"])
     frames = load_frames("synthetic", "train", 2)
     with pytest.raises(ValueError, match="fit: 0 validation frames; expected at least 1"):
-        fit(tiny_model, {}, frames, [], get_schedule("quick"), tmp_path / "run")
+        fit(zoo.config(tiny_model), frames, [], get_schedule("quick"), tmp_path / "run")
     with pytest.raises(ValueError, match="fit: 0 steps; expected at least 1"):
-        fit(tiny_model, {}, frames, frames, get_schedule("quick"), tmp_path / "run", steps=0)
+        fit(zoo.config(tiny_model), frames, frames, get_schedule("quick"), tmp_path / "run", steps=0)
 
 
 def test_ship_without_a_checkpoint_says_what_is_missing(tiny_model, tmp_path):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from dsfec_jax import cli, zoo
+from dsfec_jax import api, cli, zoo
 from dsfec_jax.modalities.rd import cli as cli_rd
 from dsfec_jax.boxes.boxes2d import Boxes2D
 from dsfec_jax.data.rd.preview import PREDICTION, render_rd
@@ -76,7 +76,7 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
         assert measured["protocol"] == "rd_coco" and measured["data"] == "rd-synthetic" and measured["frames"] == 2
         assert {"mAP50", "mAP50_95", "darod_mAP50"} <= set(measured)
     assert manifest["measured"]["test"]["mAP50"] == result["mAP50"]  # test split, data seed 0: what eval scored
-    assert type(zoo.load("yolov8n", weights=shipped / "yolov8n.msgpack")).__name__ == "RDPredictor"
+    assert type(api.load("yolov8n", weights=shipped / "yolov8n.msgpack")).__name__ == "RDPredictor"
 
 
 def test_pngs_draw_only_predictions_above_the_min_score(tmp_path):
@@ -104,20 +104,19 @@ class Recorder:
         self.loads.append((data, split, count))
         return load_rd_samples("synthetic", split, 1)
 
-    def fake_fit(self, model, overrides, samples, val, schedule, run_dir, seed, steps, window, augment,
-                 eval_every, info, **kw):
-        self.fit = {"model": model, "overrides": overrides, "schedule": schedule.name, "window": window, **kw}
+    def fake_fit(self, cfg, samples, val, schedule, run_dir, seed, steps, augment, eval_every, info, **kw):
+        self.fit = {"model": cfg.name, "schedule": schedule.name, **kw}
         return None, None, {"mAP50": 0.0}
 
 
 @pytest.fixture
 def recorder(monkeypatch, tmp_path):
     from dsfec_jax.data.rd import sources
-    from dsfec_jax.modalities.points import fit
+    from dsfec_jax.modalities.rd import fit
 
     rec = Recorder()
     monkeypatch.setattr(sources, "load_rd_samples", rec.load)
-    monkeypatch.setattr(fit, "fit", rec.fake_fit)
+    monkeypatch.setattr(fit, "fit_rd", rec.fake_fit)
     return rec
 
 
@@ -132,7 +131,7 @@ def test_train_defaults_for_rd_models(recorder, tmp_path, capsys, extra, data, s
     the profiles map through Family.schedules; no pillar slots or windows reach fit."""
     assert cli.main(["train", "--model", "yolov8n", "--run-dir", str(tmp_path / "r"), *extra]) == 0
     assert recorder.loads == [(data, "train", train_count), (data, "val", 100)]
-    assert recorder.fit == {"model": "yolov8n", "overrides": {}, "schedule": schedule, "window": None}
+    assert recorder.fit == {"model": "yolov8n", "overrides": {}, "schedule": schedule}
     assert json.loads(capsys.readouterr().out)["final"] == {"mAP50": 0.0}
 
 
@@ -145,11 +144,11 @@ def test_eval_keeps_the_papers_confidence_unless_told(monkeypatch, capsys):
         def predict_samples(self, samples):
             return {s.sample_id: Boxes2D.empty(with_scores=True) for s in samples}
 
-    def fake_load(name, weights=None, predictor_options=None, **overrides):
-        seen.append(predictor_options["score_threshold"])
+    def fake_predictor(detector, variables, score_threshold):
+        seen.append(score_threshold)
         return Quiet()
 
-    monkeypatch.setattr(zoo, "load", fake_load)
+    monkeypatch.setattr(cli_rd, "RDPredictor", fake_predictor)
     for extra in ([], ["--score-threshold", "0.3"]):
         assert cli.main(["eval", "--model", "yolov8n", "--frames", "1", "--json", *extra]) == 0
         assert last_json(capsys)["mAP50"] in (0.0, None)
@@ -199,9 +198,9 @@ def test_export_quantize_and_onnx_eval_reach_the_rd_deploy_functions(monkeypatch
     from dsfec_jax.core import checkpoint
     import importlib
 
-    # the modules (dsfec_jax.deploy re-exports functions of the same names)
-    export_rd, ort_rd, quantize_rd = (importlib.import_module(f"dsfec_jax.deploy.{m}")
-                                      for m in ("export_rd", "ort_rd", "quantize_rd"))
+    # the modules (the record's wrappers import the functions from them when called)
+    export_rd, ort_rd, quantize_rd = (importlib.import_module(f"dsfec_jax.modalities.rd.{m}")
+                                      for m in ("export", "ort", "quantize"))
 
     det = zoo.create("yolov8n")
     weights = tmp_path / "w.msgpack"

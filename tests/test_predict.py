@@ -3,7 +3,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dsfec_jax import zoo
+from dsfec_jax import api, zoo
 from dsfec_jax.boxes.decode import decode_heads
 from dsfec_jax.boxes.nms import batched_rotated_nms
 from dsfec_jax.boxes.pixor import cell_centres
@@ -74,7 +74,7 @@ def test_shipped_weights_detect_nothing_inside_the_grid_on_an_empty_cloud(name):
     (a +2 shift of the Car logits' bias puts detections 23 m inside: the test fails)."""
     cfg = zoo.config(name)
     cells = cfg.grid.shape[0] * cfg.grid.shape[1] // cfg.output_stride**2  # decode every cell: top-k
-    predictor = zoo.load(name, max_pillars=64, predictor_options={"top_k": cells})  # must not hide one
+    predictor = api.load(name, max_pillars=64, predictor_options={"top_k": cells})  # must not hide one
     grid = predictor.detector.config.grid
     assert len(predictor(np.zeros((0, 7), np.float32)).scores) == 0  # the predictor reports nothing
     tensors = pillarize(np.zeros((0, 7), np.float32), predictor.spec)[0]
@@ -90,7 +90,7 @@ def test_predictor_runs_on_the_fewest_slots_that_hold_the_frame():
     from dsfec_jax.data.points.pillarize import select_columns
     from dsfec_jax.modalities.points.predict import SLOT_BUCKET, decoded_network, fewest_slots
 
-    predictor = zoo.load("dsfec_s", max_pillars=8 * SLOT_BUCKET)
+    predictor = api.load("dsfec_s", max_pillars=8 * SLOT_BUCKET)
     frame = load_frames("synthetic", "test", 1)[0]
     sparse = predictor(frame)
     tensors = pillarize(select_columns(frame, predictor.spec.features), predictor.spec)[0]

@@ -65,7 +65,7 @@ def predictor_with_outputs(image_box, image_hw, input_hw, class_map=None):
 def test_a_decoded_box_comes_back_in_image_pixels(image_hw, input_hw, box):
     predictor, seen = predictor_with_outputs(box, image_hw, input_hw)
     image = CameraImage("im", np.zeros((*image_hw, 3), np.uint8), Boxes2D.empty())
-    found = predictor.predict_images([image])["im"]
+    found = predictor.predict_samples([image])["im"]
     assert seen == [(1, *input_hw, 3)]  # letterboxed into the rectangle, one batch
     assert len(found) == 1 and found.names[0] == "pedestrian" and found.scores[0] > 0.99
     np.testing.assert_allclose(found.xyxy[0], box, atol=1e-3)
@@ -79,10 +79,10 @@ def test_the_class_map_renames_and_drops():
     to_voc = {"car": "car", "bus": "bus", "pedestrian": "person", "cyclist": "bicycle"}
     predictor, _ = predictor_with_outputs(box, hw, (256, 416), class_map=to_voc)
     assert predictor.classes == ("car", "bus", "person", "bicycle")
-    found = predictor.predict_images([image])["im"]
+    found = predictor.predict_samples([image])["im"]
     assert list(found.names) == ["person"]
     predictor, _ = predictor_with_outputs(box, hw, (256, 416), class_map={"car": "car"})
-    assert len(predictor.predict_images([image])["im"]) == 0  # pedestrians are not reported
+    assert len(predictor.predict_samples([image])["im"]) == 0  # pedestrians are not reported
     with pytest.raises(ValueError, match="dog"):
         CameraPredictor(zoo.create("shuffle_yolov3", num_classes=5, class_names=STREET), None, class_map={"dog": "dog"})
 

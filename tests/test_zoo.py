@@ -2,7 +2,7 @@ import jax
 import numpy as np
 import pytest
 
-from dsfec_jax import zoo
+from dsfec_jax import api, zoo
 from conftest import random_variables, tiny
 
 # Pinned parameter counts (params collection; BN moving statistics excluded). A change here
@@ -46,7 +46,7 @@ def test_the_camera_family_is_a_zoo_family():
     with pytest.raises(ValueError, match="class_names"):
         zoo.create("shuffle_yolov3", class_names=("car", "bus"))  # 2 names for 20 classes
     with pytest.raises(FileNotFoundError, match="ships no weights"):
-        zoo.load("yolov3_darknet53")  # too costly to train on this CPU (README); Shuffle-YOLOv3's are shipped
+        api.load("yolov3_darknet53")  # too costly to train on this CPU (README); Shuffle-YOLOv3's are shipped
 
 
 def test_the_depth_network_is_an_auxiliary_model_of_the_zoo():
@@ -174,19 +174,19 @@ def test_every_shipped_weights_file_loads_and_records_how_it_was_made(path):
 
         sample = load_rd_samples("synthetic", "val", 1)[0]
         tiny = RDRepresentation(fit="resize", input_hw=(64, 32))
-        out = zoo.load(path.stem, predictor_options={"representation": tiny})(sample)
+        out = api.load(path.stem, predictor_options={"representation": tiny})(sample)
         assert len(out) and np.isfinite(out.scores).all() and out.xyxy.max() <= max(sample.shape)
         return
     if family.modality == "image":  # an image in, 2D boxes in its pixels out (letterboxed small: a cheap compile)
         from dsfec_jax.data.camera.sources import load_camera_images
 
         image = load_camera_images("street", "val", 1)[0]
-        out = zoo.load(path.stem, predictor_options={"size": 96, "score_threshold": 0.0})(image)
+        out = api.load(path.stem, predictor_options={"size": 96, "score_threshold": 0.0})(image)
         h, w = image.hw
         assert len(out) and np.isfinite(out.scores).all() and (out.xyxy[:, 2] <= w).all() and (out.xyxy[:, 3] <= h).all()
         assert set(out.names) <= set(manifest["training"]["overrides"]["class_names"])
         return
-    predictor = zoo.load(path.stem, grid=TINY_GRID, max_pillars=96)  # weights fit any grid
+    predictor = api.load(path.stem, grid=TINY_GRID, max_pillars=96)  # weights fit any grid
     rng = np.random.default_rng(0)
     points = np.column_stack([rng.uniform(0, 16, 50), rng.uniform(-8, 8, 50), rng.normal(0, 1, (50, 5))])
     out = predictor(points.astype(np.float32))

@@ -36,7 +36,7 @@ class FrameResult:
 
 class EdgePipeline:
     """`pipeline(frame) -> FrameResult`. detect(image) -> Boxes2D with class names and scores (e.g.
-    zoo.load("shuffle_yolov3")); depth(frame, camera) -> (H, W) metres (edge.depth_sources);
+    api.load("shuffle_yolov3")); depth(frame, camera) -> (H, W) metres (edge.depth_sources);
     camera: the frames' PinholeCamera; time_offset_s: added to a frame's time for the batch's UNIX
     time (the synthetic drive's clock starts at 0)."""
 

@@ -14,11 +14,15 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 
+ALL_CLASSES = "*"  # among a Protocol's match_classes: every class of the predictor
+
+
 @dataclasses.dataclass(frozen=True)
 class Protocol:
-    """How detections are scored. `validate(predictor, samples, match_classes)` -> (logged scores,
-    per-sample match tables for bootstrap intervals, {} where none are kept); `report(samples,
-    detections, predictor)` -> (the eval command's fields, its one-line summary)."""
+    """How detections are scored. `validate(predictor, samples, match_classes)` predicts and scores
+    -> (logged scores, per-sample match tables of `match_classes` for bootstrap intervals, {} where
+    none are kept; ALL_CLASSES asks for every class); `report(samples, detections, predictor)` ->
+    (the eval command's fields, its one-line summary)."""
 
     validate: Callable[..., tuple[dict, dict]]
     report: Callable[..., tuple[dict, str]]
@@ -26,21 +30,29 @@ class Protocol:
 
 @dataclasses.dataclass(frozen=True)
 class Commands:
-    """The `dsfec` verbs as this modality runs them; each gets the parsed arguments and the config
-    the CLI resolved once from --model and --set. `train(args, cfg, schedule, info)`,
-    `eval_or_predict(args, cfg)`, `export(args, cfg, command)` and `quantize(args)` return an exit
-    code; `ship_predictor(cfg, source, info)` -> (predictor, variables) measured for a manifest.
-    `data_fields(args, overrides)` adds the config fields the data decides (the camera family's
-    classes) before the config is resolved; `refuse(args, command)` exits naming a flag this
-    modality does not take."""
+    """The `dsfec` verbs as this modality runs them (modalities/<name>/cli.py). cli.py parses the
+    flags, asks `refuse`, resolves the config once (--model, --set and `config_fields`) and hands
+    each verb the parsed arguments and that config; it prints what the verbs return.
 
-    train: Callable[..., int]
-    eval_or_predict: Callable[..., int]
-    ship_predictor: Callable[..., tuple[Any, dict]]
-    export: Callable[..., int]
-    quantize: Callable[..., int]
-    data_fields: Callable[[Any, dict], dict]
+    `refuse(args, command)` exits naming a flag this modality does not take (given explicitly).
+    `config_fields(args, overrides)` -> the overrides the config is resolved with: --set plus the
+    fields the flags or the data decide (points: --max-pillars; image: the classes of --data for
+    train, of the run that made --weights otherwise).
+    `train(args, cfg, overrides, schedule, info)` -> the final validation scores (run.json records
+    `overrides`, `info` the command and data).
+    `eval_or_predict(args, cfg)` -> (items, detections, predictor, extra report fields) after
+    writing predict's files; the CLI scores and prints them with the family's protocol.
+    `ship_predictor(cfg, source, info)` -> (predictor, variables) of a run's checkpoint at the
+    evaluation settings, `cfg` the run's config (run.json's overrides).
+    `export(args, cfg, command)` and `quantize(args)` -> the written files and figures."""
+
     refuse: Callable[[Any, str], None]
+    config_fields: Callable[[Any, dict], dict]
+    train: Callable[..., dict]
+    eval_or_predict: Callable[..., tuple]
+    ship_predictor: Callable[..., tuple[Any, dict]]
+    export: Callable[..., dict]
+    quantize: Callable[..., dict]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,6 +87,9 @@ class Modality:
     `train_bench_batches(name, overrides, settings)` -> (detector, device batches, windows)
     (profile.training); `train_bench_note(records, settings)` -> what the train-bench table's footer
     says of this modality's records ('' for none); `zoo_table` (the README zoo table).
+    Training: `fit(cfg, samples, val, schedule, run_dir, seed, steps, augment, eval_every, run_info,
+    progress, init_variables, *, overrides, match_classes, **options)` -> (detector, final state,
+    validation scores); `options` are the modality's own (points: window, window_sampling).
     Commands: `commands` (the CLI's verbs)."""
 
     name: str
@@ -83,6 +98,7 @@ class Modality:
     predictor: Callable[..., Any]
     ort_predictor: Callable[..., Any]
     protocols: Mapping[str, Protocol]
+    fit: Callable[..., tuple]
     commands: Commands
     export: Callable[..., Any]
     quantize: Callable[..., Any]

@@ -19,7 +19,7 @@ Column = tuple[str, str, int]
 class MetricProtocol:
     """How a family's detections are scored, and how its results are reported.
 
-    `name` picks the metric in `dsfec_jax.modalities.points.evaluate.PROTOCOLS` (metrics never import models, so the
+    `name` picks the metric among the modalities' `protocols` (modalities/registry.protocol; metrics never import models, so the
     record names the metric rather than holding it). `headline` is the key that ranks candidates
     and keeps the best checkpoint; `columns` lay out its ablation tables; `keep` is what a weights
     manifest records of a validation; `match_class`, if set, is the class whose per-frame matches a
@@ -110,7 +110,7 @@ class Family:
     the family's networks read, 'points' (point clouds, pillarized; DSFEC, RadarNeXt), 'rd'
     (range-Doppler maps as images; the YOLO-RD family) or 'image' (RGB camera images; the camera
     YOLOv3 family). Shared code that only handles one
-    modality asks for it (`zoo.require_modality`) and fails with a clear message otherwise.
+    modality asks for it (modalities/checks.require_modality) and fails with a clear message otherwise.
     Data: `benchmark` (the embedded synthetic source its commands default to).
     Training: `loss(cfg)` -> fn(outputs, targets) -> (loss, parts); `schedules` maps the
     commands' profiles (`--schedule quick|paper`) to train.schedules presets.
@@ -119,7 +119,7 @@ class Family:
     maps); the others have none.
     Deploy: `deploy_config` / `deploy_variables` (the inference form; identity when there is none);
     `weight_fields`: config fields a training run sets from its data (the camera family's classes),
-    which `zoo.load` reads back from the weights' training record.
+    which `api.load` reads back from the weights' training record.
     Measurement: `metric` (MetricProtocol), `stem_memory(cfg, variables)` (a paper's memory
     figure in MiB, or None) and `memory_convention` (what that figure counts). Search: `recipes` (name -> SearchRecipe), `axes` (derived search axes:
     name -> fn(base_cfg, overrides, value) -> overrides), `supernet` (or None)."""
@@ -142,6 +142,11 @@ class Family:
     stem_memory: Callable[[Any, dict], float] | None = None
     weight_fields: tuple[str, ...] = ()
     memory_convention: str = "stem input + output maps (float32, batch 1) + stem weights, MiB (DSFEC Table 2)"
+
+    def reads(self, modality: str) -> bool:
+        """Whether the family's networks read `modality` (a name of MODALITIES): the one place a
+        listing by modality compares names."""
+        return self.modality == modality
 
     def __post_init__(self):
         wrong = [n for n, cfg in self.variants.items() if not isinstance(cfg, self.config_class)]

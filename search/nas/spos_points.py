@@ -34,7 +34,7 @@ from dsfec_jax.core import checkpoint
 from dsfec_jax.core.provenance import jsonable, versions
 from dsfec_jax.data.batches import BatchStream
 from dsfec_jax.data.points.pillarize import PillarSpec, pillar_budget
-from dsfec_jax.modalities.points.evaluate import validate
+from dsfec_jax.modalities.registry import protocol
 from dsfec_jax.modalities.points.predict import Predictor
 from dsfec_jax.train.loop import RunSpec, train
 from dsfec_jax.train.schedules import optimizer
@@ -167,7 +167,7 @@ class PointSubnetScorer:
         self.predictor = SubnetPointPredictor(validator, {"params": self.params, "batch_stats": self.start_stats})
 
     def evaluate(self) -> dict:
-        scores, _ = validate(self.family.metric.name, self.predictor, self.val)
+        scores, _ = protocol(self.family.metric.name).validate(self.predictor, self.val)
         return {k: float(v) for k, v in scores.items() if k in self.family.metric.keep and np.isscalar(v)}
 
     __call__ = score_inherited

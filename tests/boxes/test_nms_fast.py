@@ -127,11 +127,11 @@ def test_labels_of_any_kind_and_bad_input():
 def dsfec_s_candidates():
     """The decoded top-k candidates (before NMS) of the shipped DSFEC-S on two synthetic test
     frames, with the predictor that made them."""
-    from dsfec_jax import zoo
+    from dsfec_jax import api
     from dsfec_jax.data.points.pillarize import pillarize, select_columns
     from dsfec_jax.data.points.sources import load_frames
 
-    predictor = zoo.load("dsfec_s", max_pillars=512)
+    predictor = api.load("dsfec_s", max_pillars=512)
     frames = load_frames("synthetic", "test", 2)
     out = []
     for frame in frames:

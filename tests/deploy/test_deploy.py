@@ -8,7 +8,7 @@ import jax
 import numpy as np
 import pytest
 
-from dsfec_jax import zoo
+from dsfec_jax import api, zoo
 from dsfec_jax.core.grid import Grid
 from dsfec_jax.data.points.pillarize import PillarSpec, pillarize, select_columns
 from dsfec_jax.data.points.sources import load_frames
@@ -126,9 +126,10 @@ def test_ort_predictor_matches_the_jax_predictor(tmp_path):
     variables = det.init(jax.random.key(1))
     export(det, variables, tmp_path / "s", top_k=30)
     frames = load_frames("synthetic", "val", 2)
-    ours = OrtPredictor(tmp_path / "s", score_threshold=0.0).predict_batch(list(frames))
-    ref = Predictor(det, variables, score_threshold=0.0, top_k=30).predict_batch(list(frames))
-    for a, b in zip(ours, ref):
+    ours = OrtPredictor(tmp_path / "s", score_threshold=0.0).predict_samples(frames)
+    ref = Predictor(det, variables, score_threshold=0.0, top_k=30).predict_samples(frames)
+    assert list(ours) == list(ref)
+    for a, b in zip(ours.values(), ref.values()):
         assert len(a.scores) == len(b.scores) > 0
         np.testing.assert_allclose(np.sort(a.scores), np.sort(b.scores), atol=1e-4)
 
@@ -161,7 +162,7 @@ def test_export_command_writes_a_runnable_model_from_shipped_weights(shipped_s_e
     manifest = json.loads((path / "deploy.json").read_text())
     assert manifest["source"]["command"].startswith("dsfec ") and manifest["versions"]["jax"]
     frame = load_frames("synthetic", "test", 1)[0]
-    ours, ref = OrtPredictor(path)(frame), zoo.load("dsfec_s", max_pillars=512)(frame)
+    ours, ref = OrtPredictor(path)(frame), api.load("dsfec_s", max_pillars=512)(frame)
     assert len(ours.scores) == len(ref.scores) > 0
     np.testing.assert_allclose(ours.scores, ref.scores, atol=1e-4)
 
@@ -178,10 +179,10 @@ def accuracy_change(reference, candidate, frames) -> dict:
     """What quantization changed, with the project's nuScenes metric: the Car mAP change against
     the ground truth (README's INT8 table), and `agreement`, the candidate's Car mAP (%) scored
     against the reference's own detections (score >= 0.2) as ground truth: 100 = the same boxes."""
-    from dsfec_jax.modalities.points.evaluate import headline, predict_frames, score
+    from dsfec_jax.modalities.points.evaluate import headline, score
     from dsfec_jax.metrics import nuscenes
 
-    ref, cand = predict_frames(reference, frames), predict_frames(candidate, frames)
+    ref, cand = reference.predict_samples(frames), candidate.predict_samples(frames)
     grid = reference.spec.grid
     change = headline(score(frames, cand, grid=grid))["car_mAP"] - headline(score(frames, ref, grid=grid))["car_mAP"]
     own = {k: d.boxes.select(d.scores >= 0.2) for k, d in ref.items()}

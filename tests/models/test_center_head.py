@@ -127,7 +127,7 @@ def test_fit_trains_radarnext_on_windows_including_empty_ones(tmp_path):
     frames = load_frames("synthetic4d", "train", 4, features="native")
     val = load_frames("synthetic4d", "val", 1, features="native")
     overrides = dict(grid=GRID, max_pillars=96, layer_nums=(1, 1, 1))
-    _, state, scores = fit("radarnext_mdfen", overrides, frames, val, get_schedule("radarnext", batch_size=2),
+    _, state, scores = fit(zoo.config("radarnext_mdfen", **overrides), frames, val, get_schedule("radarnext", batch_size=2),
                            tmp_path, steps=4, window=32, eval_every=4, progress=False)
     logged = [json.loads(line) for line in (tmp_path / "metrics.jsonl").read_text().splitlines()]
     losses = [row["loss"] for row in logged if "loss" in row]

@@ -1,7 +1,7 @@
 """The camera halves of `dsfec train | eval | predict | ship | export | quantize`: what the commands do
-for a model whose family reads RGB images (zoo.family_of(name).modality == 'image': Shuffle-YOLOv3,
-Darknet53-YOLOv3).
-cli.py parses the flags and hands camera models here; the shared flags read:
+for a model whose family reads RGB images (Shuffle-YOLOv3, Darknet53-YOLOv3). cli.py parses the
+flags, resolves the config once (--model, --set and `config_fields`: the classes) and hands it here
+through the Modality record; the shared flags read:
 
 - `--data street` (the family's embedded synthetic benchmark, also what `synthetic` means here),
   `street:DIR` (the same frames through a PNG/NPZ cache under DIR), `voc:DIR` (PASCAL VOC: a
@@ -15,13 +15,13 @@ cli.py parses the flags and hands camera models here; the shared flags read:
   renamed into the data's classes (data/camera/sources.class_map: same name, or pedestrian <->
   person and cyclist <-> bicycle) and only the classes both know are scored.
 - `--schedule quick|paper` is the family's profile (yolo3_quick / yolo3_paper, train/schedules.py)
-  with its multi-scale sizes (train/fit_camera.MULTI_SCALE); `--sizes LOW,HIGH` (or one size)
+  with its multi-scale sizes (modalities/image/fit.MULTI_SCALE); `--sizes LOW,HIGH` (or one size)
   overrides them. Validation, eval and predict letterbox each image to `--size` (416) on its long side.
 - eval / predict keep detections down to darknet's mAP threshold (0.005) unless --score-threshold
   says otherwise; predict writes COCO JSON (results list, and with --gt-out the ground truth; image
   pixels) and with --png-dir one PNG per image (ground truth in class colours, predictions scoring
   >= 0.25 in magenta).
-- `dsfec export` writes the network and the YOLOv3 decode (deploy/export_camera.py) at one letterboxed
+- `dsfec export` writes the network and the YOLOv3 decode (modalities/image/export.py) at one letterboxed
   size: `--size S` the street frames' rectangle at long side S (default 416: 256 x 416), or
   `--input-hw H,W` any (multiples of 32; a square takes images of every shape, letterboxed as
   darknet does). The classes are those of the run that made --weights, as for eval.
@@ -37,19 +37,19 @@ This module never imports cli (the library's one-way door): cli passes what it p
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 from ... import zoo
-from ..rd.cli import refuse_point_flags
 from ...models.camera.decode import EVAL_SCORE
 from ...models.camera.family import FAMILY as CAMERA, class_fields
+from ..cli_flags import check_export_model, export_weights, onnx_predictor, refuse_point_flags, weights_or_exit
+from .predict import CameraPredictor
 
 READS = "whole camera images"
 EVAL_SIZE = 416  # eval / predict: the long side images are letterboxed to (the paper's 416)
 TRAIN_FRAMES = 1000  # street frames generated for training without --frames (~10 frames/s per core)
-PNG_MIN_SCORE = 0.25  # predictions drawn on a PNG (ultralytics' predict default, as cli_rd's)
+PNG_MIN_SCORE = 0.25  # predictions drawn on a PNG (ultralytics' predict default, as modalities/rd/cli.py's)
 CLASS_FIELDS = CAMERA.weight_fields  # num_classes, class_names: set from the training data
 SYNONYMS = {"synthetic": "street"}  # the commands' default --data is the family's embedded benchmark
 
@@ -75,6 +75,20 @@ def _source_classes(args) -> tuple[str, ...]:
         return source_classes(data_source(args))
     except (ValueError, FileNotFoundError) as err:
         sys.exit(f"dsfec {args.command}: {err}")
+
+
+def refuse(args, command: str) -> None:
+    refuse_point_flags(args, READS)
+
+
+def config_fields(args, overrides: dict) -> dict:
+    """--set with the model's classes: for training, those of --data (with_data_classes); for
+    the other commands, those of the run that made --weights (shipped weights: their manifest;
+    a checkpoint: its run.json), --set first."""
+    if args.command == "train":
+        return with_data_classes(args, overrides)
+    weights = Path(args.weights) if getattr(args, "weights", None) else zoo.shipped_weights(args.model)
+    return {**zoo.trained_fields(weights, CLASS_FIELDS), **overrides}
 
 
 def with_data_classes(args, overrides: dict) -> dict:
@@ -107,27 +121,20 @@ def parse_sizes(text: str | None):
         sys.exit(f"--sizes {text!r}: expected LOW,HIGH or SIZE, multiples of 32 ({err})")
 
 
-def train(args, overrides: dict, schedule, info: dict) -> int:
+def train(args, cfg, overrides: dict, schedule, info: dict) -> dict:
     """`dsfec train` of a camera model: fit_camera on the images of --data."""
     from .fit import fit_camera
     from ...train.loop import RunMismatch
 
-    refuse_point_flags(args, READS)
-    overrides, sizes, size = with_data_classes(args, overrides), parse_sizes(args.sizes), eval_size(args)
-    try:
-        zoo.config(args.model, **overrides)
-    except (TypeError, ValueError) as err:
-        sys.exit(f"--set: {err}")
+    sizes, size = parse_sizes(args.sizes), eval_size(args)
     images = _images(args, args.split, args.frames or TRAIN_FRAMES)
     val = _images(args, "val", args.val_frames)
     try:
-        _, _, final = fit_camera(args.model, overrides, images, val, schedule, args.run_dir, args.seed, args.steps,
-                                 not args.no_augment, args.eval_every, info, sizes=sizes,
-                                 eval_size=size)
+        _, _, final = fit_camera(cfg, images, val, schedule, args.run_dir, args.seed, args.steps, not args.no_augment,
+                                 args.eval_every, info, overrides=overrides, sizes=sizes, eval_size=size)
     except (RunMismatch, ValueError) as err:  # another setup in the run directory; classes the model lacks
         sys.exit(f"dsfec train: {err}")
-    print(json.dumps({"run_dir": str(args.run_dir), "final": final}))
-    return 0
+    return final
 
 
 def _onnx_predictor(args, score_threshold: float):
@@ -136,55 +143,51 @@ def _onnx_predictor(args, score_threshold: float):
     from ...deploy.ort import read_manifest
     from .ort import OrtCameraPredictor
 
-    if not args.onnx:
-        sys.exit("--runtime onnx needs --onnx DIR (written by `dsfec export --model NAME --out DIR`)")
-    try:
-        _, manifest = read_manifest(args.onnx, "image")
-        if manifest["model"] != args.model:
-            sys.exit(f"{args.onnx}: holds {manifest['model']!r}, not --model {args.model!r}")
-        predictor = OrtCameraPredictor(args.onnx, score_threshold=score_threshold,
-                                       class_map=class_map(manifest["classes"], _source_classes(args)))
-    except (FileNotFoundError, ValueError) as err:  # no export there, another modality's, no shared class
-        sys.exit(f"dsfec {args.command}: --onnx {err}")
+    def make(export_dir):  # the model is checked before its classes are mapped into --data's
+        _, manifest = read_manifest(export_dir, "image")
+        check_export_model(args, manifest)
+        return OrtCameraPredictor(export_dir, score_threshold=score_threshold,
+                                  class_map=class_map(manifest["classes"], _source_classes(args)))
+
+    predictor = onnx_predictor(args, make)  # also exits on no shared class (a ValueError)
     if args.size is not None and args.size != predictor.size:
         sys.exit(f"dsfec {args.command}: --size {args.size}: the export {args.onnx} takes images letterboxed to "
                  f"{predictor.size} (its input {tuple(predictor.manifest['input_hw'])}); drop --size or export again")
     return predictor
 
 
-def _predictor(args, overrides: dict, score_threshold: float):
+def _predictor(args, cfg, score_threshold: float):
+    """CameraPredictor of --weights with the config's classes (config_fields: the weights' run's)
+    renamed into --data's."""
     from ...data.camera.sources import class_map
 
-    weights = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
-    try:  # the classes of the run that made the weights (zoo.load reads them the same way), --set first
-        classes = zoo.config(args.model, **{**zoo.trained_fields(weights, CLASS_FIELDS), **overrides}).classes
-        mapping = class_map(classes, _source_classes(args))
+    try:
+        mapping = class_map(cfg.classes, _source_classes(args))
     except (TypeError, ValueError) as err:
         sys.exit(f"dsfec {args.command}: {err}")
-    options = {"score_threshold": score_threshold, "size": eval_size(args), "class_map": mapping}
-    try:
-        return zoo.load(args.model, weights=args.weights, predictor_options=options, **overrides)
-    except FileNotFoundError as err:
-        sys.exit(f"dsfec {args.command}: {err}" + ("" if "--weights" in str(err) else " (--weights)"))
+    detector, variables = weights_or_exit(args, cfg)
+    return CameraPredictor(detector, variables, score_threshold=score_threshold, size=eval_size(args),
+                           class_map=mapping)
 
 
-def eval_or_predict(args, overrides: dict) -> int:
-    """`dsfec eval` / `dsfec predict` of a camera model: VOC mAP@0.5 (VOC07 and all-point) and COCO AP."""
-    from ...cli_report import predict_and_report
+def eval_or_predict(args, cfg) -> tuple:
+    """`dsfec eval` / `dsfec predict` of a camera model -> (images, detections, predictor, extra
+    report fields); the protocol: VOC mAP@0.5 (VOC07 and all-point) and COCO AP."""
     from ...data.camera.voc import UnreadableImage
 
-    refuse_point_flags(args, READS)
     eval_size(args)
     threshold = EVAL_SCORE if args.score_threshold is None else args.score_threshold
     # a bad --data fails before any network is compiled; a bad --onnx (read, not compiled) before images are made
     onnx = _onnx_predictor(args, threshold) if args.runtime == "onnx" else None
     images = _images(args, args.split, args.frames)
-    predictor = onnx or _predictor(args, overrides, threshold)
+    predictor = onnx or _predictor(args, cfg, threshold)
     try:  # images are decoded as the loop reaches them
-        return predict_and_report(args, images, predictor, predictor.predict_images, write_predictions, "images",
-                                  score_threshold=threshold, classes_scored=list(predictor.classes))
+        detections = predictor.predict_samples(images)
+        if args.command == "predict":
+            write_predictions(args, images, detections, predictor)
     except UnreadableImage as err:
         sys.exit(f"dsfec {args.command}: {err}")
+    return images, detections, predictor, {"score_threshold": threshold, "classes_scored": list(predictor.classes)}
 
 
 def write_predictions(args, images, detections: dict, predictor) -> None:
@@ -211,12 +214,10 @@ def write_predictions(args, images, detections: dict, predictor) -> None:
                             found.select(found.scores >= min_score))
 
 
-def ship_predictor(model: str, source: Path, info: dict):
+def ship_predictor(cfg, source: Path, info: dict):
     """(CameraPredictor at the evaluation settings, variables) of a run's checkpoint, built with the
-    run's config overrides and evaluation size."""
-    from .predict import CameraPredictor
-
-    det = zoo.create(model, **{k: tuple(v) if isinstance(v, list) else v for k, v in info.get("overrides", {}).items()})
+    run's config and evaluation size."""
+    det = zoo.Detector(cfg)
     variables = zoo.model_variables(det, source)
     return CameraPredictor(det, variables, size=info.get("eval_size", 416)), variables
 
@@ -237,36 +238,26 @@ def export_input_hw(args) -> tuple[int, int]:
         sys.exit(f"dsfec export: --input-hw {args.input_hw!r}: {err}")
 
 
-def export(args, overrides: dict, command: str) -> int:
-    """`dsfec export` of a camera model: deploy.export_camera (network + YOLOv3 decode; ONNX and
-    jax.export) with the classes of the run that made --weights."""
+def export(args, cfg, command: str) -> dict:
+    """`dsfec export` of a camera model: export_camera (network + YOLOv3 decode; ONNX and
+    jax.export) with the classes of the run that made --weights (config_fields)."""
     from .export import export_camera
 
-    refuse_point_flags(args, READS)
     input_hw = export_input_hw(args)
-    path = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
-    if not path.is_file():
-        sys.exit(f"no weights at {path}: pass --weights (a trained checkpoint or weights file)")
-    try:
-        det = zoo.create(args.model, **{**zoo.trained_fields(path, CLASS_FIELDS), **overrides})
-    except (TypeError, ValueError) as err:
-        sys.exit(f"--set: {err}")
+    path = export_weights(args)
+    det = zoo.Detector(cfg)
     variables = zoo.model_variables(det, path)
-    out = export_camera(det, variables, args.out, source={"weights": str(path), "command": command},
-                        input_hw=input_hw)
-    print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))
-    return 0
+    return export_camera(det, variables, args.out, source={"weights": str(path), "command": command},
+                         input_hw=input_hw)
 
 
-def quantize(args) -> int:
+def quantize(args) -> dict:
     """`dsfec quantize` of a camera export: static INT8 calibrated on letterboxed street train images."""
     from ...data.camera.sources import load_camera_images
     from .quantize import quantize_camera
 
     try:
-        out = quantize_camera(args.onnx, args.out, load_camera_images("street", "train", args.calib_frames, args.seed),
-                              calibration=args.calibration)
+        return quantize_camera(args.onnx, args.out, load_camera_images("street", "train", args.calib_frames, args.seed),
+                               calibration=args.calibration)
     except ValueError as err:  # an export that takes other images than the street frames' rectangle
         sys.exit(f"dsfec quantize: {err}")
-    print(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in out.items()}, indent=2))
-    return 0

@@ -22,6 +22,7 @@ from ...boxes.boxes2d import Boxes2D
 from ...data.camera.images import CameraImage
 from ...metrics.boxes2d.coco import coco_evaluate
 from ...metrics.boxes2d.voc_ap import voc_ap
+from ..base import Protocol
 
 
 def percent(value) -> float | None:
@@ -65,7 +66,7 @@ def score_camera(gts: Mapping[str, Boxes2D], dets: Mapping[str, Boxes2D], classe
 
 def evaluate_camera(predictor, images: Sequence[CameraImage]) -> tuple[dict, dict[str, Boxes2D]]:
     """Predict `images` and score them with the predictor's classes -> (scores, detections)."""
-    detections = predictor.predict_images(images)
+    detections = predictor.predict_samples(images)
     return score_images(images, detections, predictor.classes), detections
 
 
@@ -81,3 +82,18 @@ def summary(scores: dict) -> str:
     per_class = "  ".join(f"{c} {fmt(v)}" for c, v in scores["AP50"].items())
     return (f"VOC07 mAP@0.5 {fmt(scores['mAP50'])}  all-point {fmt(scores['mAP50_all'])}  "
             f"COCO mAP@[.5:.95] {fmt(scores['coco_mAP50_95'])}  AP50 {fmt(scores['coco_AP50'])}  ({per_class})")
+
+
+# --- the camera_voc protocol (the record's `protocols`: modalities/image/record.py)
+
+def validate(predictor, images: Sequence[CameraImage], match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
+    """Scores (VOC07 mAP@0.5 headline); no per-image match tables (no bootstrap intervals yet)."""
+    return evaluate_camera(predictor, images)[0], {}
+
+
+def report(images: Sequence[CameraImage], detections: Mapping[str, Boxes2D], predictor) -> tuple[dict, str]:
+    result = {"protocol": "camera_voc", **score_images(images, detections, predictor.classes)}
+    return result, summary(result)
+
+
+PROTOCOLS = {"camera_voc": Protocol(validate, report)}  # the record's `protocols`

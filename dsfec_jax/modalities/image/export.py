@@ -87,8 +87,9 @@ def export_camera(detector, variables, out_dir: str | Path, source: dict | None 
     """Write model.onnx, deploy.json and (with `jax_export`) model.jax_export to out_dir -> {name: path}.
     input_hw: the letterboxed (H, W) the graph takes (default: the street frames' 256 x 416)."""
     from ... import zoo
+    from ..checks import require_modality
 
-    zoo.require_modality(detector.config, "image", "export_camera")
+    require_modality(detector.config, "image", "export_camera")
     hw = check_input_hw(input_hw or street_input_hw())
     detector, variables = zoo.deploy(detector, variables)  # the inference form (unchanged for this family)
     det = grouped(detector)

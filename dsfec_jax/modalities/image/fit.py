@@ -1,6 +1,6 @@
 """Train a camera zoo detector (Shuffle-YOLOv3, Darknet53-YOLOv3) on camera images, validating with
-the family's protocol (VOC07 mAP@0.5 headline, evaluate_camera): `train.fit.fit` hands image models
-here, so `dsfec train` reaches it the same way as the other families.
+the family's protocol (VOC07 mAP@0.5 headline, evaluate_camera): the image modality's `fit` verb
+(`dsfec train` reaches it through the Modality record, as it reaches the other families').
 
 Batches come from data.camera.batches.CameraBatchStream (batch s a pure function of (seed, s), its
 input size too: resumed runs see the same data at the same sizes), the targets from the family's
@@ -28,7 +28,8 @@ from ... import zoo
 from ...data.camera.augment import CameraAugment
 from ...data.camera.batches import DARKNET_FINAL_SIZE, DARKNET_SIZES, CameraBatchStream, MultiScale
 from ...data.camera.images import CameraImage
-from ..points.evaluate import validate as run_validation
+from ..checks import require_modality
+from .evaluate import PROTOCOLS
 from ...models.camera.targets import DEFAULT_MAX_BOXES, pad_batch
 from .predict import CameraPredictor
 from ...train.loop import RunSpec, run_record, train
@@ -45,34 +46,39 @@ def multi_scale_for(schedule: Schedule) -> MultiScale:
     return MULTI_SCALE.get(schedule.name, FIXED_SIZE)
 
 
-def fit_camera(model: str, overrides: dict, images: Sequence[CameraImage], val: Sequence[CameraImage],
-               schedule: Schedule, run_dir: str | Path, seed: int = 0, steps: int | None = None, augment: bool = True,
+def fit_camera(cfg, images: Sequence[CameraImage], val: Sequence[CameraImage], schedule: Schedule,
+               run_dir: str | Path, seed: int = 0, steps: int | None = None, augment: bool = True,
                eval_every: int | None = 200, run_info: dict | None = None, progress: bool = True,
-               init_variables: dict | None = None, sizes: MultiScale | None = None, eval_size: int = 416,
+               init_variables: dict | None = None, *, overrides: dict | None = None,
+               match_classes: Sequence[str] = (), sizes: MultiScale | None = None, eval_size: int = 416,
                max_boxes: int = DEFAULT_MAX_BOXES,
                precise_bn_images: int = PRECISE_BN_IMAGES) -> tuple[zoo.Detector, dict, dict]:
-    """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val scores).
-    Images carry class names among the model's (`class_names` / `num_classes` overrides: the street
-    benchmark's 5 classes, see cli_camera). `sizes` None: the schedule's multi-scale (MULTI_SCALE);
+    """Train (or resume) a detector of config `cfg` in run_dir -> (detector, final state, val scores).
+    run.json records `cfg.name` and `overrides` (what the caller asked for; default zoo.overrides_of(cfg)).
+    Images carry class names among the model's (`class_names` / `num_classes`: the street
+    benchmark's 5 classes, see modalities/image/cli.py). `sizes` None: the schedule's multi-scale (MULTI_SCALE);
     validation letterboxes each image to `eval_size` (its long side), after the BN statistics are
-    re-estimated on `precise_bn_images` training images (0: not; rounded up to whole batches)."""
-    det = zoo.create(model, **overrides)
-    family = zoo.require_modality(det.config, "image", "fit_camera")
+    re-estimated on `precise_bn_images` training images (0: not; rounded up to whole batches).
+    `match_classes` is the protocol's (camera_voc keeps no match tables)."""
+    det = zoo.Detector(cfg)
+    family = require_modality(cfg, "image", "fit_camera")
+    overrides = zoo.overrides_of(cfg) if overrides is None else overrides
     total = steps or schedule.total_steps(len(images))
     sizes = dataclasses.replace(sizes or multi_scale_for(schedule), total_steps=total)  # the final-size rule's end
     targets = functools.partial(pad_batch, class_names=det.config.classes, max_boxes=max_boxes)
     stream = CameraBatchStream(images, schedule.batch_size, seed, targets, CameraAugment() if augment else None, sizes)
     spec = RunSpec(Path(run_dir), schedule, seed, total_steps=total, progress=progress)
-    info = run_record(run_info, model, overrides, det.config, schedule, seed, total, stream.augment,
+    info = run_record(run_info, cfg.name, overrides, det.config, schedule, seed, total, stream.augment,
                       train_images=len(images), val_images=len(val), multi_scale=sizes.record(),
                       aspect=stream.aspect, eval_size=eval_size, max_boxes=max_boxes,
                       precise_bn_images=precise_bn_images)
 
     predictor = CameraPredictor(det, None, size=eval_size)  # one jitted network for every validation
+    protocol = PROTOCOLS[family.metric.name]
 
     def validate(state):
         predictor.variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
-        return run_validation(family.metric.name, predictor, val)[0]
+        return protocol.validate(predictor, val, match_classes)[0]
 
     # BN statistics re-estimated before each validation (train/precise_bn.py: the running ones lag
     # far behind in short runs)

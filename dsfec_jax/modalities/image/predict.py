@@ -21,7 +21,7 @@ from typing import Mapping, Sequence
 import jax
 import numpy as np
 
-from ... import zoo
+from ..checks import require_modality
 from ...boxes.boxes2d import Boxes2D
 from ...data.camera.batches import eval_input
 from ...data.camera.images import CameraImage
@@ -73,7 +73,7 @@ class CameraPipeline:
     def __call__(self, image) -> Boxes2D:
         """One image: a CameraImage, or (H, W, 3) uint8 RGB."""
         image = as_camera_image(image)
-        return self.predict_images([image])[image.image_id]
+        return self.predict_samples([image])[image.image_id]
 
     def letterboxed(self, items: Sequence[CameraImage], input_hw) -> tuple[np.ndarray, list[Affine]]:
         """Images of one input shape -> (the batch (B, H, W, 3) float32, each image -> input map)."""
@@ -85,7 +85,7 @@ class CameraPipeline:
         return detections(boxes, scores, self.model_classes, score_threshold=self.score_threshold,
                           iou_threshold=self.nms_iou, max_detections=self.max_detections)
 
-    def predict_images(self, images: Sequence[CameraImage], batch_size: int = 8) -> dict[str, Boxes2D]:
+    def predict_samples(self, images: Sequence[CameraImage], batch_size: int = 8) -> dict[str, Boxes2D]:
         """image id -> detections in that image's pixels, batches of one input shape at a time."""
         out = {}
         for start in range(0, len(images), batch_size):
@@ -113,7 +113,7 @@ class CameraPredictor(CameraPipeline):
     def __init__(self, detector, variables, size: int = 416, rect: bool = True,
                  score_threshold: float = EVAL_SCORE, nms_iou: float = NMS_IOU,
                  max_detections: int = MAX_DETECTIONS, class_map: Mapping[str, str] | None = None):
-        zoo.require_modality(detector.config, "image", "CameraPredictor")
+        require_modality(detector.config, "image", "CameraPredictor")
         self.detector, self.variables = detector, variables
         self._setup(detector.name, detector.config.classes, size, rect, score_threshold, nms_iou, max_detections,
                     class_map)

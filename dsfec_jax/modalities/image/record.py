@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from ..base import Commands, Modality, Protocol
+from ..base import Commands, Modality
+from . import cli
+from .evaluate import PROTOCOLS
+from .fit import fit_camera
 from .zoo_table import TABLE as ZOO_TABLE
 
 
@@ -29,27 +32,6 @@ def export(detector, variables, out_dir, **options):
 def quantize(export_dir, out_dir, samples, **options):
     from .quantize import quantize_camera
     return quantize_camera(export_dir, out_dir, samples, **options)
-
-
-def _validate(name):
-    def validate(predictor, samples, match_classes=()):
-        from ..points import evaluate
-        return evaluate.PROTOCOLS[name][0](predictor, samples, match_classes)
-    return validate
-
-
-def _report(name):
-    def report(samples, detections, predictor):
-        from ..points import evaluate
-        return evaluate.PROTOCOLS[name][1](samples, detections, predictor)
-    return report
-
-
-def _cli(verb):
-    def call(*args, **kwargs):
-        from . import cli
-        return getattr(cli, verb)(*args, **kwargs)
-    return call
 
 
 def bench_chains(name, runtimes, threads, workdir, repeats):
@@ -88,10 +70,10 @@ def train_bench_note(records, settings):
 
 MODALITY = Modality(
     name="image", noun="image", load_samples=load_samples, predictor=predictor, ort_predictor=ort_predictor,
-    protocols={n: Protocol(_validate(n), _report(n)) for n in ("camera_voc",)},
-    commands=Commands(train=_cli("train"), eval_or_predict=_cli("eval_or_predict"), ship_predictor=_cli("ship_predictor"),
-                      export=_cli("export"), quantize=_cli("quantize"), data_fields=lambda args, o: o,
-                      refuse=lambda args, command: None),
+    protocols=PROTOCOLS, fit=fit_camera,
+    commands=Commands(refuse=cli.refuse, config_fields=cli.config_fields, train=cli.train,
+                      eval_or_predict=cli.eval_or_predict, ship_predictor=cli.ship_predictor, export=cli.export,
+                      quantize=cli.quantize),
     export=export, quantize=quantize, bench_chains=bench_chains, stage_name=stage_name,
     latency_stages=latency_stages, size_fields=size_fields, train_bench_fields=train_bench_fields,
     train_bench_batches=train_bench_batches, train_bench_note=train_bench_note, zoo_table=ZOO_TABLE,

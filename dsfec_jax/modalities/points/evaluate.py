@@ -9,16 +9,8 @@ import numpy as np
 from ...data.points.frame import Frame
 from ...data.points.kitti import VOD_IMAGE_SIZE, VOD_RADAR_TO_CAMERA
 from ...metrics import kitti3d, nuscenes, resampling
-from .predict import Detections, Predictor
-
-
-def predict_frames(predictor: Predictor, frames: Sequence[Frame], batch_size: int = 8) -> dict[str, Detections]:
-    out = {}
-    for start in range(0, len(frames), batch_size):
-        chunk = [frames[i] for i in range(start, min(start + batch_size, len(frames)))]
-        for frame, det in zip(chunk, predictor.predict_batch(chunk)):
-            out[frame.frame_id] = det
-    return out
+from ..base import Protocol
+from .predict import Detections, HostPipeline
 
 
 def in_grid(boxes, grid):
@@ -60,15 +52,13 @@ def headline(metrics: dict) -> dict:
             "mAP": 100 * metrics["mAP"]}
 
 
-def evaluate(predictor: Predictor, frames: Sequence[Frame], classes=nuscenes.DSFEC_CLASSES,
+def evaluate(predictor: HostPipeline, frames: Sequence[Frame], classes=nuscenes.DSFEC_CLASSES,
              match_classes: Sequence[str] = ()) -> dict:
-    metrics = score(frames, predict_frames(predictor, frames), classes, predictor.spec.grid, match_classes)
+    metrics = score(frames, predictor.predict_samples(frames), classes, predictor.spec.grid, match_classes)
     return {**headline(metrics), "metrics": metrics}
 
 
 # VoD's IoU thresholds under the project's canonical class names (VoD's Cyclist is "bicycle").
-ALL_CLASSES = "*"  # among match_classes: every class of the predictor
-
 VOD_IOU = {"car": 0.5, "pedestrian": 0.25, "bicycle": 0.25}
 TJ4D_IOU = {**VOD_IOU, "truck": 0.5}
 
@@ -114,7 +104,7 @@ def _label_heights(frame: Frame) -> np.ndarray:
 def evaluate_vod(predictor, frames: Sequence[Frame], iou_thresholds: dict | None = None) -> dict:
     """Predict `frames`, then `score_vod` them with the predictor's classes and grid."""
     frames = [frames[i] for i in range(len(frames))]
-    return score_vod(frames, predict_frames(predictor, frames), predictor.spec.grid, predictor.class_names,
+    return score_vod(frames, predictor.predict_samples(frames), predictor.spec.grid, predictor.class_names,
                      iou_thresholds)
 
 
@@ -144,93 +134,30 @@ def score_vod(frames: Sequence[Frame], detections: dict, grid, class_names, iou_
             "AP_corridor": corridor["AP"], "num_gt": entire["num_gt"], "num_gt_corridor": corridor["num_gt"]}
 
 
-# --- metric protocols by name: a family's record names its protocol (models never import metrics)
+# --- the point protocols (the record's `protocols`: modalities/points/record.py)
 
-def _validate_nuscenes(predictor, frames, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
+def validate_nuscenes(predictor, frames, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
     result = evaluate(predictor, frames, match_classes=match_classes)
     m = result.pop("metrics")
     return {**result, "class_mAP": m["class_mAP"], "AP@4": m.get("AP@4", {})}, m.get("match_tables", {})
 
 
-def _validate_vod(predictor, frames, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
+def validate_vod(predictor, frames, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
     return evaluate_vod(predictor, frames), {}
 
 
-def _report_nuscenes(frames, detections, predictor) -> tuple[dict, str]:
+def report_nuscenes(frames, detections, predictor) -> tuple[dict, str]:
     metrics = score(frames, detections, grid=predictor.spec.grid)
     result = {"protocol": "nuscenes", **headline(metrics), "metrics": metrics}
     return result, (f"Car mAP {result['car_mAP']:.2f}  Car AP@4 {result['car_AP4']:.2f}  "
                     f"mAP(all classes) {result['mAP']:.2f}")
 
 
-def _report_vod(frames, detections, predictor) -> tuple[dict, str]:
+def report_vod(frames, detections, predictor) -> tuple[dict, str]:
     result = {"protocol": "vod", **score_vod(frames, detections, predictor.spec.grid, predictor.class_names)}
     return result, f"VoD 3D mAP {result['mAP']:.2f}  corridor {result['mAP_corridor']:.2f}  " + "  ".join(
         f"{c} {ap:.2f}" for c, ap in result["AP"].items())
 
 
-def _validate_rd_coco(predictor, samples, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
-    from ..rd.evaluate import evaluate_rd
-    scores = evaluate_rd(predictor, samples, [c for c in predictor.classes if c in match_classes or
-                                              ALL_CLASSES in match_classes])[0]
-    return scores, scores.pop("match_tables", {})
-
-
-def _report_rd_coco(samples, detections, predictor) -> tuple[dict, str]:
-    from ..rd.evaluate import ground_truth, score_rd, summary
-    result = {"protocol": "rd_coco", **score_rd(ground_truth(samples), detections, predictor.classes)}
-    return result, summary(result)
-
-
-def _validate_camera_voc(predictor, images, match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
-    from ..image.evaluate import evaluate_camera
-    return evaluate_camera(predictor, images)[0], {}  # no per-image match tables (no bootstrap intervals yet)
-
-
-def _report_camera_voc(images, detections, predictor) -> tuple[dict, str]:
-    from ..image.evaluate import score_images, summary
-    result = {"protocol": "camera_voc", **score_images(images, detections, predictor.classes)}
-    return result, summary(result)
-
-
-# name -> (validate(predictor, frames, match_classes) -> (logged scores, match tables),
-#          report(frames, detections, predictor) -> (the eval command's fields, its one-line summary));
-# the range-Doppler protocol's "frames" are RD samples and its predictor an RD one (predict_rd), the
-# camera protocol's are data.camera CameraImages and a CameraPredictor (predict_camera)
-PROTOCOLS = {"nuscenes": (_validate_nuscenes, _report_nuscenes), "vod": (_validate_vod, _report_vod),
-             "rd_coco": (_validate_rd_coco, _report_rd_coco), "camera_voc": (_validate_camera_voc, _report_camera_voc)}
-
-
-def _protocol(name: str):
-    if name not in PROTOCOLS:
-        raise KeyError(f"unknown metric protocol {name!r}; known: {sorted(PROTOCOLS)}")
-    return PROTOCOLS[name]
-
-
-def validate(protocol: str, predictor, frames: Sequence[Frame], match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
-    """Predict and score `frames` under `protocol` -> (headline and per-class scores, match tables
-    of `match_classes` for bootstrap intervals; {} where the protocol keeps none). ALL_CLASSES
-    ("*") among `match_classes` asks for every class of the predictor (the RD protocol)."""
-    return _protocol(protocol)[0](predictor, frames, match_classes)
-
-
-def report(protocol: str, frames: Sequence[Frame], detections: dict, predictor) -> tuple[dict, str]:
-    """Score given detections under `protocol` -> (result fields, a one-line summary)."""
-    return _protocol(protocol)[1](frames, detections, predictor)
-
-
-def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
-    """What a weights manifest records: the family's protocol on `frames` frames of `split` of its
-    embedded synthetic benchmark (data seed 0), the keys its protocol keeps."""
-    if family.modality == "rd":
-        from ...data.rd.sources import load_rd_samples
-        data = load_rd_samples(family.benchmark, split, frames, 0)
-    elif family.modality == "image":
-        from ...data.camera.sources import load_camera_images
-        data = load_camera_images(family.benchmark, split, frames, 0)
-    else:
-        from ...data.points.sources import load_frames
-        data = load_frames(family.benchmark, split, frames, 0, features=family.points.input_columns)
-    scores, _ = validate(family.metric.name, predictor, data)
-    return {k: scores[k] for k in family.metric.keep} | {
-        "frames": frames, "data_seed": 0, "data": family.benchmark, "protocol": family.metric.name}
+# the protocols a point family's MetricProtocol may name (the record's `protocols`)
+PROTOCOLS = {"nuscenes": Protocol(validate_nuscenes, report_nuscenes), "vod": Protocol(validate_vod, report_vod)}

@@ -1,5 +1,6 @@
-"""Train a zoo detector on frames with a schedule, validating on held-out frames: the one
-training entry point that `dsfec train` and search trials share."""
+"""Train a point-cloud zoo detector on frames with a schedule, validating on held-out frames with
+the family's protocol: the points modality's `fit` verb (`dsfec train` and search trials reach it
+through the Modality record)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from ...data.points.augment import AugmentConfig
 from ...data.batches import BatchStream, training_windows
 from ...data.points.frame import Frame
 from ...data.points.pillarize import PillarSpec, pillar_budget
-from .evaluate import validate as run_validation
+from .evaluate import PROTOCOLS
 from .predict import Predictor
 from ...core.provenance import jsonable, versions
 from ...train.loop import RunSpec, train
@@ -31,42 +32,31 @@ def _check_counts(counts: dict) -> None:
         raise ValueError(f"fit: {', '.join(bad)}; expected at least 1")
 
 
-def window_detectors(model: str, overrides: dict, window: int | None, sizing_frames=None) -> list:
-    """The detector of each training window (`window` cells; None: the whole grid) of `model` with
-    `overrides`. With `sizing_frames`, pillar slots are sized to them (no pillar lost, far less
-    padding: pillar_budget); without, the config's max_pillars."""
-    cfg = zoo.config(model, **overrides)
+def window_detectors(cfg, window: int | None, sizing_frames=None) -> list:
+    """The detector of each training window (`window` cells; None: the whole grid) of config `cfg`.
+    With `sizing_frames`, pillar slots are sized to them (no pillar lost, far less padding:
+    pillar_budget); without, the config's max_pillars."""
     slots = cfg.max_pillars if sizing_frames is None else pillar_budget(sizing_frames, cfg.max_pillars)
-    return [zoo.create(model, **{**overrides, "grid": g, "max_pillars": slots})
-            for g in training_windows(cfg.grid, window)]
+    return [zoo.Detector(dataclasses.replace(cfg, grid=g, max_pillars=slots)) for g in training_windows(cfg.grid, window)]
 
 
-def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Frame], schedule: Schedule,
-        run_dir: str | Path, seed: int = 0, steps: int | None = None, window: int | None = 96,
-        augment: bool = True, eval_every: int | None = 200, run_info: dict | None = None,
-        progress: bool = True, init_variables: dict | None = None,
-        window_sampling: str = "cycle", match_classes: Sequence[str] = ()) -> tuple[zoo.Detector, dict, dict]:
-    """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val headline).
+def fit(cfg, frames: Sequence[Frame], val: Sequence[Frame], schedule: Schedule, run_dir: str | Path, seed: int = 0,
+        steps: int | None = None, augment: bool = True, eval_every: int | None = 200, run_info: dict | None = None,
+        progress: bool = True, init_variables: dict | None = None, *, overrides: dict | None = None,
+        match_classes: Sequence[str] = (), window: int | None = 96,
+        window_sampling: str = "cycle") -> tuple[zoo.Detector, dict, dict]:
+    """Train (or resume) a detector of config `cfg` in run_dir -> (detector, final state, val headline).
+    run.json records `cfg.name` and `overrides` (what the caller asked for; default zoo.overrides_of(cfg)).
     `init_variables`: start from these trained variables where modules match (train.warm_start);
-    `window_sampling`: how steps pick their training window (data.batches.BatchStream);
-    `match_classes` (evaluate.validate's): the headline also carries the last validation's
-    "match_tables" (evaluate.score), kept out of the logged metrics. A range-Doppler model
-    (frames and val are then RD samples) trains through train.fit_rd, a camera model (frames are
-    data.camera CameraImages) through train.fit_camera; windows do not apply to either."""
+    `window`: training windows of that many cells (None: the whole grid); `window_sampling`: how
+    steps pick their training window (data.batches.BatchStream); `match_classes` (the protocol's
+    validate): the headline also carries the last validation's "match_tables" (evaluate.score),
+    kept out of the logged metrics."""
     _check_counts({"training frames": len(frames), "validation frames": len(val), "steps": steps})
-    modality = zoo.family_of(zoo.config(model, **overrides)).modality
-    if modality == "rd":  # frames are RD samples
-        from ..rd.fit import fit_rd
-        return fit_rd(model, overrides, frames, val, schedule, run_dir, seed, steps, augment, eval_every, run_info,
-                      progress, init_variables, match_classes=match_classes)
-    if modality == "image":  # frames are camera images; the camera protocol keeps no match tables
-        from ..image.fit import fit_camera
-        return fit_camera(model, overrides, frames, val, schedule, run_dir, seed, steps, augment, eval_every,
-                          run_info, progress, init_variables)
-    det = zoo.create(model, **overrides)
-    cfg = det.config
+    det = zoo.Detector(cfg)
     family = zoo.family_of(cfg)
-    windows = window_detectors(model, overrides, window, frames)
+    overrides = zoo.overrides_of(cfg) if overrides is None else overrides
+    windows = window_detectors(cfg, window, frames)
     # A family whose network takes each window's origin as an input (RadarNeXt) trains every
     # window with one compiled step (its 0.16 m grid needs 16 windows of 96 cells); the others
     # (DSFEC) compile one step per window.
@@ -76,17 +66,17 @@ def fit(model: str, overrides: dict, frames: Sequence[Frame], val: Sequence[Fram
                          origin_input=origin, window_sampling=window_sampling)
     total = steps or schedule.total_steps(len(frames))
     spec = RunSpec(Path(run_dir), schedule, seed, total_steps=total, progress=progress)
-    info = {**(run_info or {}), "model": model, "overrides": jsonable(overrides),
+    info = {**(run_info or {}), "model": cfg.name, "overrides": jsonable(overrides),
             "config": jsonable(dataclasses.asdict(cfg)), "schedule": dataclasses.asdict(schedule), "seed": seed,
             "steps": total, "train_frames": len(frames), "val_frames": len(val),
             "windows": [[w.config.grid.x_range, w.config.grid.y_range] for w in windows], "train_pillars": windows[0].config.max_pillars,
             "window_sampling": window_sampling, "versions": versions()}
 
     last_tables = {}  # the match tables of the latest validation, which the returned headline is
+    protocol = PROTOCOLS[family.metric.name]
 
     def validate(state):  # the family's protocol: headline figures plus per-class ones (small enough to log)
-        scores, tables = run_validation(family.metric.name, Predictor(det, state_variables(state)), val,
-                                        match_classes)
+        scores, tables = protocol.validate(Predictor(det, state_variables(state)), val, match_classes)
         last_tables.update(tables)
         return scores
 

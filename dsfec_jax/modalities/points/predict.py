@@ -3,7 +3,7 @@ decode -> rotated NMS per class (host)."""
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import NamedTuple, Sequence
 
 import jax
 import numpy as np
@@ -52,9 +52,20 @@ class HostPipeline:
         raise NotImplementedError
 
     def __call__(self, points) -> Detections:
-        return self.predict_batch([points])[0]
+        return self._detect([points])[0]
 
-    def predict_batch(self, items: list) -> list[Detections]:
+    def predict_samples(self, frames: Sequence[Frame], batch_size: int = 8) -> dict[str, Detections]:
+        """frame id -> detections, `batch_size` frames a network call (every modality's predictor
+        has this verb: modalities/base.py)."""
+        out = {}
+        for start in range(0, len(frames), batch_size):
+            chunk = [frames[i] for i in range(start, min(start + batch_size, len(frames)))]
+            for frame, found in zip(chunk, self._detect(chunk)):
+                out[frame.frame_id] = found
+        return out
+
+    def _detect(self, items: list) -> list[Detections]:
+        """Detections of one batch of point arrays or Frames, in order."""
         arrays = [select_columns(p, self.spec.features) if isinstance(p, Frame) else np.asarray(p, np.float32)
                   for p in items]
         tensors = [pillarize(a, self.spec)[0] for a in arrays]

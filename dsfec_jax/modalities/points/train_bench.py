@@ -35,7 +35,7 @@ def training_batches(name: str, overrides: dict, settings) -> tuple[zoo.Detector
     frames = load_frames(family.benchmark, "train", max(used, settings.budget_frames), settings.seed,
                          features=family.points.input_columns)
     # slots sized as a training run on this benchmark sizes them (train.fit), not on the few frames timed
-    windows = window_detectors(name, overrides, settings.window, frames if settings.size_pillars else None)
+    windows = window_detectors(cfg, settings.window, frames if settings.size_pillars else None)
     frames = [frames[i] for i in range(used)]
     stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.points.targets(cfg), settings.batch,
                          settings.seed, AugmentConfig(), origin_input=family.points.origin_input)

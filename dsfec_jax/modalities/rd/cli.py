@@ -1,8 +1,7 @@
 """The range-Doppler halves of `dsfec train | eval | predict | ship | export | quantize`: what the
-commands do for a model whose family reads RD maps (zoo.family_of(name).modality == 'rd', the
-YOLO-RD family). cli.py parses the flags, checks what both halves share (--model, --set,
---schedule) and hands RD models here; the flags mean the same for both families, with these
-readings for RD models:
+commands do for a model whose family reads RD maps (the YOLO-RD family). cli.py parses the flags,
+resolves the config once (--model, --set) and hands it here through the Modality record; the flags
+mean the same for every family, with these readings for RD models:
 
 - `--data synthetic` (the default) is the embedded RD benchmark (data/rd/synthetic); `raddet:PATH`
   and `carrada:PATH` read real maps. `--frames` counts RD samples.
@@ -13,20 +12,22 @@ readings for RD models:
 - eval / predict keep detections down to the paper's evaluation confidence (decode.EVAL_CONF,
   0.001) unless --score-threshold says otherwise; predict writes COCO JSON (results list and
   ground truth, map-pixel boxes) and one PNG per sample with its ground truth and predictions.
-- the point-cloud flags (--window, --window-sampling, --max-pillars, export's --top-k) do not apply
-  to whole RD maps: given explicitly they are refused, naming the flag, rather than ignored.
+- the point-cloud flags (--window, --window-sampling, --max-pillars, export's --top-k) and the
+  camera ones (--size, --sizes) do not apply to whole RD maps: given explicitly they are refused,
+  naming the flag, rather than ignored.
 
 This module never imports cli (the library's one-way door): cli passes what it parsed.
 """
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 from ... import zoo
 from ...models.yolo_rd.decode import EVAL_CONF
+from ..cli_flags import export_weights, onnx_predictor, refuse_camera_flags, refuse_point_flags, weights_or_exit
+from .predict import RDPredictor
 
 # yolo_quick (train/schedules.py) is "15 epochs over ~1000 synthetic 256x64 samples": 62 batches of
 # 16 an epoch, the 14,880 training frames its CPU timing assumes
@@ -35,19 +36,16 @@ TRAIN_SAMPLES = 1000
 # ultralytics/engine/predictor.py, BasePredictor sets conf 0.25 when none is given); at the
 # evaluation confidence (0.001) a map would carry up to 300 boxes, mostly noise
 PNG_MIN_SCORE = 0.25
-# flags of the point-cloud pipeline (pillars, BEV windows, per-head top-k): attribute -> flag
-POINT_FLAGS = {"window": "--window", "window_sampling": "--window-sampling", "max_pillars": "--max-pillars",
-               "top_k": "--top-k"}
+READS = "whole range-Doppler maps"
 
 
-def refuse_point_flags(args, reads: str = "whole range-Doppler maps") -> None:
-    """Exit naming every point-cloud flag the user gave to a model that `reads` something else (an
-    RD model, a camera model; the flags' defaults are None)."""
-    given = [flag for attr, flag in POINT_FLAGS.items() if getattr(args, attr, None) is not None]
-    if given:
-        sys.exit(f"dsfec {args.command}: {', '.join(given)} "
-                 f"{'applies' if len(given) == 1 else 'apply'} to point-cloud models (pillars, BEV windows); "
-                 f"{args.model!r} reads {reads}: drop {'it' if len(given) == 1 else 'them'}")
+def refuse(args, command: str) -> None:
+    refuse_camera_flags(args, command, "rd")
+    refuse_point_flags(args, READS)
+
+
+def config_fields(args, overrides: dict) -> dict:
+    return overrides  # no flag or data source sets a field of an RD model's config
 
 
 def default_train_samples(data: str) -> int | None:
@@ -67,53 +65,40 @@ def _samples(args, split: str, count: int | None, data: str | None = None) -> li
         sys.exit(f"dsfec {args.command}: {err}")
 
 
-def train(args, overrides: dict, schedule, info: dict) -> int:
-    """`dsfec train` of an RD model: fit (which hands it to train.fit_rd) on RD samples."""
-    from ..points.fit import fit
+def train(args, cfg, overrides: dict, schedule, info: dict) -> dict:
+    """`dsfec train` of an RD model: fit_rd on RD samples."""
     from ...train.loop import RunMismatch
+    from .fit import fit_rd
 
-    refuse_point_flags(args)
     samples = _samples(args, args.split, args.frames or default_train_samples(args.data))
     val = _samples(args, "val", args.val_frames)
     try:
-        _, _, final = fit(args.model, overrides, samples, val, schedule, args.run_dir, args.seed, args.steps,
-                          None, not args.no_augment, args.eval_every, info)
+        _, _, final = fit_rd(cfg, samples, val, schedule, args.run_dir, args.seed, args.steps, not args.no_augment,
+                             args.eval_every, info, overrides=overrides)
     except RunMismatch as err:  # a run directory started with another setup: the user's to fix
         sys.exit(f"dsfec train: {err}")
-    print(json.dumps({"run_dir": str(args.run_dir), "final": final}))
-    return 0
+    return final
 
 
-def _predictor(args, overrides: dict, score_threshold: float):
+def _predictor(args, cfg, score_threshold: float):
     if args.runtime == "onnx":
-        if not args.onnx:
-            sys.exit("--runtime onnx needs --onnx DIR (written by `dsfec export --model NAME --out DIR`)")
         from .ort import OrtRDPredictor
 
-        try:
-            predictor = OrtRDPredictor(args.onnx, score_threshold=score_threshold)
-        except (FileNotFoundError, ValueError) as err:  # no export there, or another modality's
-            sys.exit(f"dsfec {args.command}: --onnx {err}")
-        if predictor.manifest["model"] != args.model:
-            sys.exit(f"{args.onnx}: holds {predictor.manifest['model']!r}, not --model {args.model!r}")
-        return predictor
-    try:
-        return zoo.load(args.model, weights=args.weights, predictor_options={"score_threshold": score_threshold},
-                        **overrides)
-    except FileNotFoundError as err:
-        sys.exit(f"dsfec {args.command}: {err}" + ("" if "--weights" in str(err) else " (--weights)"))
+        return onnx_predictor(args, lambda export_dir: OrtRDPredictor(export_dir, score_threshold=score_threshold))
+    detector, variables = weights_or_exit(args, cfg)
+    return RDPredictor(detector, variables, score_threshold=score_threshold)
 
 
-def eval_or_predict(args, overrides: dict) -> int:
-    """`dsfec eval` / `dsfec predict` of an RD model: COCO mAP@50, @50-95, @30 and DAROD mAP@50."""
-    from ...cli_report import predict_and_report
-
-    refuse_point_flags(args)
+def eval_or_predict(args, cfg) -> tuple:
+    """`dsfec eval` / `dsfec predict` of an RD model -> (samples, detections, predictor, extra
+    report fields); the protocol: COCO mAP@50, @50-95, @30 and DAROD mAP@50."""
     threshold = EVAL_CONF if args.score_threshold is None else args.score_threshold
     samples = _samples(args, args.split, args.frames)  # a bad --data fails before any network is built
-    predictor = _predictor(args, overrides, threshold)
-    return predict_and_report(args, samples, predictor, predictor.predict_samples, write_predictions, "samples",
-                              score_threshold=threshold)
+    predictor = _predictor(args, cfg, threshold)
+    detections = predictor.predict_samples(samples)
+    if args.command == "predict":
+        write_predictions(args, samples, detections, predictor)
+    return samples, detections, predictor, {"score_threshold": threshold}
 
 
 def write_predictions(args, samples, detections: dict, predictor) -> None:
@@ -163,12 +148,10 @@ def _representation(info: dict):
     return RDRepresentation(**fields)
 
 
-def ship_predictor(model: str, source: Path, info: dict):
+def ship_predictor(cfg, source: Path, info: dict):
     """(RDPredictor at the evaluation settings, variables) of a run's checkpoint, built with the
-    run's config overrides and representation."""
-    from .predict import RDPredictor
-
-    det = zoo.create(model, **info.get("overrides", {}))
+    run's config and representation."""
+    det = zoo.Detector(cfg)
     variables = zoo.model_variables(det, source)
     return RDPredictor(det, variables, _representation(info)), variables
 
@@ -183,27 +166,20 @@ def parse_hw(text: str) -> tuple[int, int]:
     return hw
 
 
-def export(args, overrides: dict, command: str) -> int:
-    """`dsfec export` of an RD model: deploy.export_rd (network, DFL decode; ONNX and jax.export)."""
-    refuse_point_flags(args)
-    size = {"input_hw": parse_hw(args.input_hw)} if args.input_hw else {}
-    path = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
-    if not path.is_file():
-        sys.exit(f"no weights at {path}: pass --weights (a trained checkpoint or weights file)")
+def export(args, cfg, command: str) -> dict:
+    """`dsfec export` of an RD model: export_rd (network, DFL decode; ONNX and jax.export)."""
     from .export import export_rd
 
-    det = zoo.create(args.model, **overrides)
+    size = {"input_hw": parse_hw(args.input_hw)} if args.input_hw else {}
+    path = export_weights(args)
+    det = zoo.Detector(cfg)
     variables = zoo.model_variables(det, path)
-    out = export_rd(det, variables, args.out, source={"weights": str(path), "command": command}, **size)
-    print(json.dumps({k: str(v) for k, v in out.items()}, indent=2))
-    return 0
+    return export_rd(det, variables, args.out, source={"weights": str(path), "command": command}, **size)
 
 
-def quantize(args) -> int:
+def quantize(args) -> dict:
     """`dsfec quantize` of an RD export: static INT8 calibrated on synthetic RD train samples."""
     from .quantize import quantize_rd
 
     samples = _samples(args, "train", args.calib_frames, data="synthetic")
-    out = quantize_rd(args.onnx, args.out, samples, calibration=args.calibration)
-    print(json.dumps({k: str(v) if isinstance(v, Path) else v for k, v in out.items()}, indent=2))
-    return 0
+    return quantize_rd(args.onnx, args.out, samples, calibration=args.calibration)

@@ -16,6 +16,7 @@ from ...boxes.boxes2d import Boxes2D
 from ...data.rd.sample import RDSample
 from ...metrics.boxes2d.coco import coco_evaluate
 from ...metrics.boxes2d.darod import darod_evaluate
+from ..base import ALL_CLASSES, Protocol
 
 
 def _percent(value: float) -> float | None:
@@ -58,3 +59,20 @@ def summary(scores: dict) -> str:
         return "n/a" if v is None else f"{v:.2f}"
     return (f"mAP@50 {fmt(scores['mAP50'])}  mAP@50-95 {fmt(scores['mAP50_95'])}  mAP@30 {fmt(scores['mAP30'])}  "
             f"DAROD mAP@50 {fmt(scores['darod_mAP50'])}")
+
+
+# --- the rd_coco protocol (the record's `protocols`: modalities/rd/record.py)
+
+def validate(predictor, samples: Sequence[RDSample], match_classes: Sequence[str] = ()) -> tuple[dict, dict]:
+    """Scores (mAP@50 headline) and the COCO match tables of `match_classes` (ALL_CLASSES: every class)."""
+    scores = evaluate_rd(predictor, samples, [c for c in predictor.classes if c in match_classes or
+                                              ALL_CLASSES in match_classes])[0]
+    return scores, scores.pop("match_tables", {})
+
+
+def report(samples: Sequence[RDSample], detections: Mapping[str, Boxes2D], predictor) -> tuple[dict, str]:
+    result = {"protocol": "rd_coco", **score_rd(ground_truth(samples), detections, predictor.classes)}
+    return result, summary(result)
+
+
+PROTOCOLS = {"rd_coco": Protocol(validate, report)}  # the record's `protocols`

@@ -82,9 +82,9 @@ def export_rd(detector, variables, out_dir: str | Path, source: dict | None = No
     """Write model.onnx, deploy.json and (with `jax_export`) model.jax_export to out_dir -> {name: path}.
     input_hw: the fitted (range rows, Doppler columns) the graph takes; representation: how maps
     reach it (default: pad to input_hw)."""
-    from ... import zoo
+    from ..checks import require_modality
 
-    zoo.require_modality(detector.config, "rd", "export_rd")
+    require_modality(detector.config, "rd", "export_rd")
     cfg = detector.config
     rep = export_representation(input_hw, representation)
     specs = input_specs(cfg, input_hw, batch_size)

@@ -1,6 +1,6 @@
 """Train a range-Doppler zoo detector (the YOLO-RD family) on RD samples, validating with the
-family's protocol (COCO mAP@50 headline, evaluate_rd): `train.fit.fit` hands RD models here, so
-`dsfec train` and search trials reach it the same way as the point-cloud families.
+family's protocol (COCO mAP@50 headline, evaluate_rd): the rd modality's `fit` verb (`dsfec train`
+and search trials reach it through the Modality record, as they reach the point-cloud families').
 
 Batches come from data.rd.batches.RDBatchStream (batch s a pure function of (seed, s): resumed runs
 see the same data); the loop (train.loop) is the shared one: resumable run directory, JSONL metrics,
@@ -19,36 +19,40 @@ from ...data.rd.augment import RDAugment
 from ...data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
 from ...data.rd.representations import RDRepresentation
 from ...data.rd.sample import RDSample
-from ..points.evaluate import validate as run_validation
+from ..checks import require_modality
+from .evaluate import PROTOCOLS
 from .predict import RDPredictor
 from ...train.loop import RunSpec, run_record, train
 from ...train.schedules import Schedule
 
 
-def fit_rd(model: str, overrides: dict, samples: Sequence[RDSample], val: Sequence[RDSample], schedule: Schedule,
-           run_dir: str | Path, seed: int = 0, steps: int | None = None, augment: bool = True,
-           eval_every: int | None = 200, run_info: dict | None = None, progress: bool = True,
-           init_variables: dict | None = None, representation: RDRepresentation = RDRepresentation(),
-           max_boxes: int = DEFAULT_MAX_BOXES, match_classes: Sequence[str] = ()) -> tuple[zoo.Detector, dict, dict]:
-    """Train (or resume) `model` with `overrides` in run_dir -> (detector, final state, val scores).
-    `match_classes` (evaluate.validate's): the scores also carry the final validation's
+def fit_rd(cfg, samples: Sequence[RDSample], val: Sequence[RDSample], schedule: Schedule, run_dir: str | Path,
+           seed: int = 0, steps: int | None = None, augment: bool = True, eval_every: int | None = 200,
+           run_info: dict | None = None, progress: bool = True, init_variables: dict | None = None, *,
+           overrides: dict | None = None, match_classes: Sequence[str] = (),
+           representation: RDRepresentation = RDRepresentation(),
+           max_boxes: int = DEFAULT_MAX_BOXES) -> tuple[zoo.Detector, dict, dict]:
+    """Train (or resume) a detector of config `cfg` in run_dir -> (detector, final state, val scores).
+    run.json records `cfg.name` and `overrides` (what the caller asked for; default zoo.overrides_of(cfg)).
+    `match_classes` (the protocol's validate): the scores also carry the final validation's
     "match_tables", kept out of the logged metrics."""
-    det = zoo.create(model, **overrides)
-    family = zoo.require_modality(det.config, "rd", "fit_rd")
+    det = zoo.Detector(cfg)
+    family = require_modality(cfg, "rd", "fit_rd")
+    overrides = zoo.overrides_of(cfg) if overrides is None else overrides
     stream = RDBatchStream(samples, schedule.batch_size, seed, RDAugment() if augment else None, representation,
                            det.config.classes, max_boxes)
     total = steps or schedule.total_steps(len(samples))
     spec = RunSpec(Path(run_dir), schedule, seed, total_steps=total, progress=progress)
-    info = run_record(run_info, model, overrides, det.config, schedule, seed, total, stream.augment,
+    info = run_record(run_info, cfg.name, overrides, det.config, schedule, seed, total, stream.augment,
                       train_samples=len(samples), val_samples=len(val),
                       representation=jsonable(dataclasses.asdict(representation)), max_boxes=max_boxes)
 
     last_tables = {}  # the match tables of the latest validation, which the returned scores are
+    protocol = PROTOCOLS[family.metric.name]
 
     def validate(state):
         variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
-        scores, tables = run_validation(family.metric.name, RDPredictor(det, variables, representation), val,
-                                        match_classes)
+        scores, tables = protocol.validate(RDPredictor(det, variables, representation), val, match_classes)
         last_tables.clear()
         last_tables.update(tables)
         return scores

@@ -13,7 +13,7 @@ from typing import Sequence
 import jax
 import numpy as np
 
-from ... import zoo
+from ..checks import require_modality
 from ...boxes.boxes2d import Boxes2D
 from ...data.rd.batches import boxes_to_map, rd_eval_inputs
 from ...data.rd.representations import RDRepresentation
@@ -101,7 +101,7 @@ class RDPredictor(RDPipeline):
     def __init__(self, detector, variables, representation: RDRepresentation = RDRepresentation(),
                  score_threshold: float = EVAL_CONF, nms_iou: float = EVAL_IOU, max_detections: int = EVAL_MAX_DET,
                  postprocess: str = "host"):
-        zoo.require_modality(detector.config, "rd", "RDPredictor")
+        require_modality(detector.config, "rd", "RDPredictor")
         if postprocess not in ("host", "compiled"):
             raise ValueError(f"RDPredictor postprocess={postprocess!r}; expected 'host' or 'compiled'")
         self.detector, self.variables = detector, variables

@@ -1,0 +1,34 @@
+"""Load a trained detector as a ready predictor: the package's public entry point.
+
+    >>> from dsfec_jax import api
+    >>> predictor = api.load("dsfec_s")            # shipped weights (or weights="path.msgpack")
+    >>> detections = predictor(points)             # (N, F) radar points or a Frame -> Detections
+
+The predictor is the model's modality's (modalities/registry.modality_of): points -> Detections
+(BEV boxes), a range-Doppler sample -> Boxes2D (map cells), a camera image -> Boxes2D (pixels).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from . import zoo
+from .modalities.registry import modality_of
+
+
+def load(model, /, weights: str | Path | None = None, predictor_options: dict | None = None, **overrides):
+    """A ready predictor: `api.load("dsfec_s")(points) -> Detections`, `api.load("yolov8n")(rd_sample)
+    -> Boxes2D`, `api.load("shuffle_yolov3")(image) -> Boxes2D` (shipped weights by default).
+
+    `model` is a zoo name, with `overrides` of its config fields; the fields the training data set
+    (the camera family's classes) come from the weights' run unless given. Or a resolved config,
+    used as it is (no overrides)."""
+    if isinstance(model, str):
+        path = Path(weights) if weights else zoo.shipped_weights(model)
+        cfg = zoo.config(model, **{**zoo.trained_fields(path, zoo.family_of(model).weight_fields), **overrides})
+    elif overrides:
+        raise TypeError(f"api.load of a config takes no overrides (got {sorted(overrides)}): resolve them in the config")
+    else:
+        cfg = model
+    detector, variables = zoo.trained_detector(cfg, weights)
+    return modality_of(cfg).predictor(detector, variables, **(predictor_options or {}))
