@@ -1,5 +1,5 @@
 """Boxes that RD and camera batches cut off for want of slots reach metrics.jsonl and a warning
-(train/dropped_boxes.py); the loop's own use of it is checked by tests/train/test_fit_camera.py's run."""
+(train/dropped_boxes.py); the loop's own use of it is checked by tests/modalities/image/test_image_fit.py's run."""
 
 import logging
 

@@ -1,7 +1,7 @@
 """Training the camera family: multi-scale batches trace the jitted step once per input size, a
 resumed run ends with the losses and parameters of an uninterrupted one, and the darknet schedule
 is yolov3-voc.cfg's. A tiny Shuffle-YOLOv3 on 64-96 px inputs (compiles dominate: ~30 s a size
-here); `fit_camera` with its validation is exercised by tests/test_cli_camera.py's round trip."""
+here); `fit_camera` with its validation is exercised by tests/modalities/image/test_image_cli.py's round trip."""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 Shuffle-YOLOv3 on two street frames at 64 px (the compiles dominate: one train step size, one
 inference program shared by validation, eval and ship through the tests' compilation cache), the
 classes a street-trained model takes from its run when scored on real VOC images, the files predict
-writes, and what the commands refuse, by name (export, quantize and bench: tests/deploy/test_deploy_camera.py)."""
+writes, and what the commands refuse, by name (export, quantize and bench: tests/modalities/image/test_image_deploy.py)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Training the YOLO-RD family: a few steps lower the loss, and a resumed run ends with the parameters
 of an uninterrupted one. Tiny 64x32 inputs; each compiled step of YOLOv8n costs ~15 s here, so one
-run serves both checks (`fit` -> fit_rd -> validation is exercised by tests/test_cli_rd.py's round trip)."""
+run serves both checks (`fit` -> fit_rd -> validation is exercised by tests/modalities/rd/test_rd_cli.py's round trip)."""
 
 import json
 
