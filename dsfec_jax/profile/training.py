@@ -14,9 +14,10 @@ Each timed program is compiled ahead (`jax.jit(f).lower(...).compile()`, timed: 
 time), then every program of every config, and the two sgemm references (XLA's and numpy's
 2048^2 float32 matmul), is called once per repetition in one interleaved loop, so box noise hits
 all of them alike; the figures are medians after warm-up. The machine peak is the references
-called back to back after that loop: between the models' programs they run slower (XLA's ~1.45x,
-measured), which would understate the peak and overstate every '% of peak'. Then a few steps are
-traced with the XLA profiler and their time split by module, phase and op (op_breakdown.py).
+called back to back after that loop: between the models' programs they run slower
+(docs/profiler.md), which would understate the peak and overstate every '% of peak'. Then a few
+steps are traced with the XLA profiler and their time split by module, phase and op
+(op_breakdown.py).
 `run` measures each (model, thread count) in a fresh worker process (`python -m
 dsfec_jax.profile --train-worker`, whose entry point looks the model's modality up) pinned to that many CPUs
 before XLA starts (core/threads.py; as deploy/bench/workers.py does), so models do not disturb
@@ -212,9 +213,9 @@ def time_interleaved(workloads: list[Workload], references: dict[str, Callable[[
 
     Why the lead-in: a call right after another program pays for that program's buffers (XLA
     frees its temporary buffer after each call and the next one maps and first-touches its own):
-    measured on DSFEC-L with huge pages, the eval forward took 276 ms right after the other
-    config's train step and 175-181 ms after an eval forward. A training loop runs steps back to
-    back and an inference loop forwards back to back, so each program is timed after itself;
+    a DSFEC-L eval forward read far slower right after the other config's train step than after
+    itself (docs/profiler.md, "The bench"). A training loop runs steps back to back and an
+    inference loop forwards back to back, so each program is timed after itself;
     repetitions still alternate the configs, so load drifts hit both alike."""
     samples: dict = {w.label: {p: [] for p in PROGRAMS} for w in workloads}
     samples["sgemm"] = {k: [] for k in references}
@@ -243,7 +244,7 @@ def time_interleaved(workloads: list[Workload], references: dict[str, Callable[[
 def time_alone(references: dict[str, Callable[[], None]], settings: Settings) -> dict:
     """{reference: [ms]}: each reference called back to back, `warmup` calls then `repeats` timed.
     The machine's peak is this: the same matmul called between the models' programs runs slower
-    (measured: XLA's 2048^2 matmul 38-41 ms alone, 55-59 ms right after a DSFEC-S train step)."""
+    (docs/profiler.md, "The bench's sgemm peak")."""
     samples = {}
     for reference, call in references.items():
         for _ in range(settings.warmup):

@@ -12,8 +12,8 @@ stay on the host: ort_camera.OrtCameraPredictor runs predict_camera's CameraPipe
 Why NMS stays on the host (as for the RD family, export_rd.py): the JAX predictor runs this NMS on
 the host too (boxes/nms2d.detect_host), so both runtimes share its code and its kept boxes; a
 compiled NMS (boxes/nms2d.nms_jax, one greedy pass in a `fori_loop`) becomes an ONNX Loop over
-every candidate, measured at 48-52 ms a frame for YOLO-RD's 2,016 candidates in ONNX Runtime
-against 0.3-2.6 ms on the host (export_rd.py), and a camera graph has 32,760 at 256 x 416 with 5
+every candidate, many times slower in ONNX Runtime than on the host for YOLO-RD's 2,016
+candidates (docs/range-doppler.md, "Deploy"), and a camera graph has 32,760 at 256 x 416 with 5
 classes; jax2onnx has no batching rule for that Loop either, so the graph would be batch 1 only.
 
 The network is exported in the operators ONNX has (export.grouped: the depthwise kernels as one
