@@ -531,7 +531,7 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True, record: 
 
 
 def _record_text(record: str | Path) -> str:
-    """The record's path as the README names it: from the repository root when it lies inside it."""
+    """The record's path as the `--readme` page names it: from the repository root when it lies inside it."""
     path = Path(record).resolve()
     root = Path(__file__).resolve().parents[2]
     return str(path.relative_to(root)) if path.is_relative_to(root) else str(record)
@@ -554,7 +554,8 @@ def _notes(records: list[dict], settings: dict, modality_of: Callable[[str], Any
 
 
 def check_readme(readme: str | Path) -> str:
-    """The README's text, refused (before a long run) without the train-bench markers."""
+    """The `--readme` page's text (docs/profiler.md holds the train-bench table), refused (before a
+    long run) without the train-bench markers."""
     path = Path(readme)
     text = path.read_text() if path.is_file() else ""
     if README_START not in text or README_END not in text:
