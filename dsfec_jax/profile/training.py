@@ -97,7 +97,7 @@ class Settings:
     breakdown: bool = True
     profile_steps: int = 3
     lead_in: int = 1  # untimed calls of a program right before each timed one (time_interleaved)
-    size_pillars: bool = True  # slots sized to the data as train.fit does; False: max_pillars slots
+    size_pillars: bool = True  # slots sized to the data as modalities/points/fit.py does; False: max_pillars slots
     budget_frames: int = BUDGET_FRAMES  # train frames the slots are sized on
     image_size: int = IMAGE_SIZE  # camera models: the letterbox's long side (a multiple of 32)
 

@@ -51,7 +51,7 @@ def decoded_network(detector, variables):
 
 def postprocess_kind(detector, variables, specs) -> str:
     """TOP_K for a network with a one-to-one head (YOLOv10: its outputs are a dict, the rule
-    predict_rd.detecting_network follows), else NMS."""
+    modalities/rd/predict.detecting_network follows), else NMS."""
     names = detector.config.input_names
     outputs = jax.eval_shape(lambda v, *maps: detector.apply(v, dict(zip(names, maps))), variables, *specs)
     return TOP_K if isinstance(outputs, dict) else NMS
