@@ -8,7 +8,7 @@ are the only ones scored. Three rows, all on the held-out images at the classes 
 benchmark and VOC share (car, bus, pedestrian -> person, cyclist -> bicycle; data/camera/sources):
 1. zero-shot: the street weights as shipped;
 2. BN adapted: the same weights with their BN statistics re-estimated on the tune images (no
-   gradient step; train/fit_camera.bn_recalibration), which separates the image-statistics gap of
+   gradient step; modalities/image/fit.bn_recalibration), which separates the image-statistics gap of
    synthetic -> real from what the weights learnt;
 3. fine-tuned: every weight trained `--steps` steps on the tune images (their VOC labels renamed to
    the model's classes, boxes of other VOC classes left out: background to the model), quick

@@ -5,7 +5,7 @@
 Each RUN_DIR is a `dsfec train` directory (run.json, metrics.jsonl) and may hold `test.json`,
 the output of `dsfec eval --json` on its best checkpoint. The record keeps, per run, the exact
 training command, seed, steps, data, software versions, every validation evaluation (VoD 3D AP,
-entire area and corridor) and the test evaluation, so a README figure can be traced to the run
+entire area and corridor) and the test evaluation, so a figure of docs/radarnext.md can be traced to the run
 that produced it. Prints a Markdown table; --out writes the JSON atomically.
 
     python -m experiments.radarnext_accuracy RUN_DIR --out FILE --append

@@ -3,8 +3,8 @@ measured by the search tooling on the synthetic 4D benchmark:
 
     python -m experiments.radarnext_table3 [--profile smoke|quick|paper] [--out RUN_DIR]
 
-Position 3 fits no single feature map of the public neck by its parameter count (README,
-"RadarNeXt"); ours places it on the backbone's 64-channel output.
+Position 3 fits no single feature map of the public neck by its parameter count (docs/radarnext.md,
+the parameter table); ours places it on the backbone's 64-channel output.
 """
 
 from __future__ import annotations

@@ -22,8 +22,8 @@ RUN_DIR`. The paper's numbers are RADDet's (real data); ours are the synthetic b
 orderings and gaps compare.
 
 Every row pins the assigner's small-box rule in its trial overrides (--small-side, default 8,16:
-the rule the README's tables were measured with, the family's default before issue 49; 16,16 is
-ultralytics 8.4.190's, the family's default now), so the command reproduces the README's tables
+the rule docs/range-doppler.md's tables were measured with, the family's default before issue 49;
+16,16 is ultralytics 8.4.190's, the family's default now), so the command reproduces those tables
 and a journal's records say which rule they trained with. Records from before the pin (no
 assign_small_side in their overrides) match no row: re-run them.
 
@@ -200,7 +200,7 @@ def markdown(table: str, records: list[dict], small_side=SHIPPED_SMALL_SIDE) -> 
 
 def table_record(table: str, records: list[dict], command: str, profile: str, small_side=SHIPPED_SMALL_SIDE) -> dict:
     """The shipped record of one table: each row's trials (seeds, figures, costs, time, versions),
-    the bootstrap verdicts and the markdown, so the README's figures are traceable without runs/."""
+    the bootstrap verdicts and the markdown, so docs/range-doppler.md's figures are traceable without runs/."""
     rows = table_rows(table)
     by_key = {}
     for r in records:

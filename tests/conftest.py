@@ -30,8 +30,8 @@ jax.config.update("jax_compilation_cache_max_size", 8 << 30)
 
 # The suite's programs run on toy shapes, so compiling them costs far more than running them:
 # LLVM's optimisation of the generated loops is skipped (the XLA graph passes all still run, and
-# dots and convolutions call the same library kernels). Measured on `.ci/run`: see the README.
-# Set before the first computation, when XLA reads its flags.
+# dots and convolutions call the same library kernels). Measured on `.ci/run`: docs/setup-and-tests.md,
+# "The test suite". Set before the first computation, when XLA reads its flags.
 if "--xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
 

@@ -26,27 +26,6 @@ FIGURE = re.compile(
     r"|\d(?:[\d.]*\d)?\s?x (?:faster|slower)\b"                                    # a speed-up
     r"|\d(?:[\d.]*\d)?\s?(?:s|seconds?|minutes?) (?:a|per) (?:frame|step|image|map|call|batch)\b")
 
-# Files other helpers of issue 50 edit at the same time; the lead cleans them at the merge and
-# then empties this list.
-NOT_YET_CLEANED = (
-    "dsfec_jax/cli.py",
-    "dsfec_jax/modalities/",
-    "dsfec_jax/profile/",
-    "dsfec_jax/deploy/",
-    "dsfec_jax/zoo.py",
-    "dsfec_jax/models/family.py",
-    "dsfec_jax/models/depth/",
-    "search/trial.py",
-    "search/nas/run.py",
-    "search/nas/ray_scoring.py",
-    "search/nas/latency.py",
-    "search/nas/remedies.py",
-    "dsfec_jax/metrics/resampling.py",
-    "dsfec_jax/metrics/boxes2d/coco_matches.py",
-    "dsfec_jax/models/camera/config.py",
-    "dsfec_jax/models/yolo_rd/config.py",
-)
-
 # (file, the figure as the finder reports it) -> why it is a fact, not a measurement
 FACTS = {
     ("dsfec_jax/core/host_memory.py", "2 MiB"): "the x86-64 huge-page size",
@@ -82,8 +61,6 @@ def sources() -> list[str]:
 def test_no_measured_figures_in_source_comments():
     bad = {}
     for name in sources():
-        if name.startswith(NOT_YET_CLEANED):
-            continue
         hits = [f"line {line}: {fig}" for line, fig in measured_figures((ROOT / name).read_text())
                 if (name, fig) not in FACTS]
         if hits:

@@ -3,7 +3,7 @@ statistics. Flax stores m * 0 + (1 - m) * batch when the running statistics star
 dividing by (1 - m) gives the batch's own mean and variance exactly (no cancellation).
 
 What train/precise_bn.py averages over batches before a validation, and what the bench's stand-in
-camera weights carry (deploy/bench/model_setup.py): both read it here, deploy's doors not leading
+camera weights carry (modalities/image/bench.py): both read it here, deploy's doors not leading
 to train.
 """
 

@@ -42,7 +42,7 @@ def parse(argv=None) -> argparse.Namespace:
 
 
 def set_threads(threads: int | None) -> None:
-    """Pin the process to `threads` CPUs before XLA starts (it sizes its pool then; threads.py)."""
+    """Pin the process to `threads` CPUs before XLA starts (it sizes its pool then; core/threads.py)."""
     if threads is None:
         return
     from ..core.threads import pin

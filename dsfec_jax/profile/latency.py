@@ -1,7 +1,8 @@
 """Jitted batch-1 latency, whole network and per stage.
 
-On a shared 2-core box another process can move a timing by 4x, so models are timed in one
-interleaved loop (A B A B ...) and medians and ratios are what to quote.
+On a shared 2-core box another process can move a timing several-fold (docs/profiler.md, "Latency
+on a shared box"), so models are timed in one interleaved loop (A B A B ...) and medians and ratios
+are what to quote.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ def timing_variables(detector, seed: int = 0) -> dict:
     CPU convolution time does not depend on the weights' values, so these need only be finite and
     of a realistic scale: weights ~ N(0, 1/fan_in), biases and BN shifts 0, BN scales and variances
     1. `detector.init` would give other values at the price of compiling the whole forward pass
-    (14 s for DSFEC-L's 160 x 160 grid, twice per candidate of a search before this existed)."""
+    (seconds per model, twice per search candidate before this existed; docs/profiler.md, "Latency
+    on a shared box")."""
     rng = np.random.default_rng(seed)
 
     def fill(path, leaf):

@@ -286,7 +286,7 @@ def _short(line: str, limit: int = 240) -> str:
 
 def markdown(result: dict, rows: int = 8, full: bool = True) -> str:
     """The top rows by module (two and three path levels) and by op kind as small markdown tables;
-    full=False: the summary line and the module table only (the README's short form)."""
+    full=False: the summary line and the module table only (the train-bench table's short form, docs/profiler.md)."""
     busy = result.get("busy_percent_of_threads")
     lines = [f"Op time per step {result['op_ms_per_step']:.1f} ms summed over threads"
              + (f" ({busy:.0f} % of the threads' time while traced)" if busy else "") + "; by phase: "

@@ -14,9 +14,10 @@ Each timed program is compiled ahead (`jax.jit(f).lower(...).compile()`, timed: 
 time), then every program of every config, and the two sgemm references (XLA's and numpy's
 2048^2 float32 matmul), is called once per repetition in one interleaved loop, so box noise hits
 all of them alike; the figures are medians after warm-up. The machine peak is the references
-called back to back after that loop: between the models' programs they run slower (XLA's ~1.45x,
-measured), which would understate the peak and overstate every '% of peak'. Then a few steps are
-traced with the XLA profiler and their time split by module, phase and op (op_breakdown.py).
+called back to back after that loop: between the models' programs they run slower
+(docs/profiler.md), which would understate the peak and overstate every '% of peak'. Then a few
+steps are traced with the XLA profiler and their time split by module, phase and op
+(op_breakdown.py).
 `run` measures each (model, thread count) in a fresh worker process (`python -m
 dsfec_jax.profile --train-worker`, whose entry point looks the model's modality up) pinned to that many CPUs
 before XLA starts (core/threads.py; as deploy/bench/workers.py does), so models do not disturb
@@ -96,7 +97,7 @@ class Settings:
     breakdown: bool = True
     profile_steps: int = 3
     lead_in: int = 1  # untimed calls of a program right before each timed one (time_interleaved)
-    size_pillars: bool = True  # slots sized to the data as train.fit does; False: max_pillars slots
+    size_pillars: bool = True  # slots sized to the data as modalities/points/fit.py does; False: max_pillars slots
     budget_frames: int = BUDGET_FRAMES  # train frames the slots are sized on
     image_size: int = IMAGE_SIZE  # camera models: the letterbox's long side (a multiple of 32)
 
@@ -212,9 +213,9 @@ def time_interleaved(workloads: list[Workload], references: dict[str, Callable[[
 
     Why the lead-in: a call right after another program pays for that program's buffers (XLA
     frees its temporary buffer after each call and the next one maps and first-touches its own):
-    measured on DSFEC-L with huge pages, the eval forward took 276 ms right after the other
-    config's train step and 175-181 ms after an eval forward. A training loop runs steps back to
-    back and an inference loop forwards back to back, so each program is timed after itself;
+    a DSFEC-L eval forward read far slower right after the other config's train step than after
+    itself (docs/profiler.md, "The bench"). A training loop runs steps back to back and an
+    inference loop forwards back to back, so each program is timed after itself;
     repetitions still alternate the configs, so load drifts hit both alike."""
     samples: dict = {w.label: {p: [] for p in PROGRAMS} for w in workloads}
     samples["sgemm"] = {k: [] for k in references}
@@ -243,7 +244,7 @@ def time_interleaved(workloads: list[Workload], references: dict[str, Callable[[
 def time_alone(references: dict[str, Callable[[], None]], settings: Settings) -> dict:
     """{reference: [ms]}: each reference called back to back, `warmup` calls then `repeats` timed.
     The machine's peak is this: the same matmul called between the models' programs runs slower
-    (measured: XLA's 2048^2 matmul 38-41 ms alone, 55-59 ms right after a DSFEC-S train step)."""
+    (docs/profiler.md, "The bench's sgemm peak")."""
     samples = {}
     for reference, call in references.items():
         for _ in range(settings.warmup):
@@ -530,7 +531,7 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True, record: 
 
 
 def _record_text(record: str | Path) -> str:
-    """The record's path as the README names it: from the repository root when it lies inside it."""
+    """The record's path as the `--readme` page names it: from the repository root when it lies inside it."""
     path = Path(record).resolve()
     root = Path(__file__).resolve().parents[2]
     return str(path.relative_to(root)) if path.is_relative_to(root) else str(record)
@@ -553,7 +554,8 @@ def _notes(records: list[dict], settings: dict, modality_of: Callable[[str], Any
 
 
 def check_readme(readme: str | Path) -> str:
-    """The README's text, refused (before a long run) without the train-bench markers."""
+    """The `--readme` page's text (docs/profiler.md holds the train-bench table), refused (before a
+    long run) without the train-bench markers."""
     path = Path(readme)
     text = path.read_text() if path.is_file() else ""
     if README_START not in text or README_END not in text:

@@ -60,7 +60,8 @@ log = logging.getLogger("uvicorn.error")  # uvicorn configures it: our lines sha
 
 @dataclass(frozen=True)
 class Access:
-    """Who may do what, and what the server accepts (README, "Map service": the defaults are safe)."""
+    """Who may do what, and what the server accepts (docs/edge-and-map-service.md, "Map service":
+    the defaults are safe)."""
     write_auth: bool = True            # POST needs a device token of the batch's device
     open_reads: bool = True            # GET /objects, /tracks without a token (server.py: loopback only)
     allowed_hosts: tuple[str, ...] = LOOPBACK_NAMES

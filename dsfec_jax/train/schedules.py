@@ -25,7 +25,7 @@ fractions of the run, so --steps stretches them), weight decay 5e-4 on the conv 
 (added to the gradient, as darknet's axpy(-decay * batch, weights, updates) does), no gradient
 clipping. `yolo3_quick` is sized for the 2-core CPU: AdamW 1e-3, decoupled decay 5e-4 (SGD at
 0.001 barely moves a from-scratch network in a few hundred steps), 30 warm-up steps, batch 8,
-200 steps, x0.1 at 2/3 and 8/9; train/fit_camera pairs it with multi-scale 320-416 (darknet's is
+200 steps, x0.1 at 2/3 and 8/9; modalities/image/fit.py pairs it with multi-scale 320-416 (darknet's is
 320-608). It takes minutes on one core (the timings: docs/camera.md, "Schedules"; `dsfec bench --train
 --models shuffle_yolov3` re-measures a step).
 

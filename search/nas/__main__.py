@@ -12,7 +12,7 @@ trains the top K subnets from scratch (and --spread N more across the ranking) w
 recipe, in RUN_DIR/standalone, and adds the ranking study (Kendall tau, inherited against
 stand-alone mAP) to the report and RUN_DIR/ranking.json; --register then takes the best
 stand-alone subnet, and --record FILE keeps the study with the run's command, seed and versions
-(a record to ship beside the README's figures: RUN_DIR is scratch). --backend ray scores each generation's subnets on N Ray actors (the supernet
+(a record to ship beside docs/search.md's figures: RUN_DIR is scratch). --backend ray scores each generation's subnets on N Ray actors (the supernet
 still trains here first) and runs the stand-alone trainings as Ray Tune trials. Run the same
 command again to resume a killed run.
 """

@@ -26,7 +26,7 @@ FUSIONS = (1, 2, 3)
 
 
 # The assigner's small-box rule of every subnet (supernet, stand-alone retraining, registered
-# subnets): the README's NAS figures were measured with the family's pre-issue-49 default (8, 16),
+# subnets): docs/search.md's NAS figures were measured with the family's pre-issue-49 default (8, 16),
 # so the space pins it, and a registered subnet records it; ultralytics 8.4.190's (16, 16) is the
 # family's default for everything else (models/yolo_rd/config.py).
 YOLO_RD_SEARCH_SMALL_SIDE = SHIPPED_SMALL_SIDE

@@ -13,13 +13,13 @@ i.e. 320..608 in steps of 32): `MultiScale.size(seed, step)` draws the long side
 each size compiles once and is reused whenever it comes back. darknet also pins the end of the run
 to 608: at a switch, `if (get_current_batch(net)+200 > net->max_batches) dim = 608;`
 (pjreddie/darknet examples/detector.c train_detector); `MultiScale(final_size=608)` with the run's
-`total_steps` does the same (the `paper` profile; train/fit_camera sets total_steps).
+`total_steps` does the same (the `paper` profile; modalities/image/fit.py sets total_steps).
 
 Arrays (numpy; B = batch size, M = max boxes, (H, W) = this step's input):
   image (B, H, W, 3) float32 in [0, 1]: the letterboxed, augmented images (the network's input);
   gt_boxes (B, M, 4) float32: xyxy pixel edges in the input; gt_labels (B, M) int32; gt_mask (B, M)
-  bool: made by the family's `targets_fn(per-image Boxes2D) -> (arrays, dropped)` (train/fit_camera
-  hands in models/camera/targets.pad_batch with the model's classes: difficult boxes left out, as
+  bool: made by the family's `targets_fn(per-image Boxes2D) -> (arrays, dropped)`
+  (modalities/image/fit.py hands in models/camera/targets.pad_batch with the model's classes: difficult boxes left out, as
   darknet's voc_label.py leaves them out of its labels), so this module never imports the models.
 """
 

@@ -20,7 +20,8 @@ Facts from colindecourt/darod (`darod/metrics/mAP.py`, `eval.py`, `darod/models/
 - DAROD's metric drops predictions whose four coordinates are all zero (the NMS output's padding);
   so does this module, after the cap as there.
 
-Our choices where DAROD's code leaves it open (the README states them):
+Our choices where DAROD's code leaves it open (the protocol: docs/range-doppler.md, "Metrics for
+2D boxes"):
 - Classes: DAROD averages over every configured class (RADDet 6, CARRADA 3), and every one of
   them has ground truth in those test sets. Here a class without ground truth has AP NaN and is
   left out of the mean (DAROD would give 0 without detections of it, NaN with some).

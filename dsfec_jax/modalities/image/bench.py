@@ -3,7 +3,7 @@ letterbox (host: the image scaled and centred into the network input), network_d
 and YOLOv3 decode), nms (darknet's host post-processing and the boxes mapped back to the image).
 
 The network + decode stage of each runtime is run through the pipelines that also letterbox and
-post-process (predict_camera.CameraPipeline), so every
+post-process (modalities/image/predict.CameraPipeline), so every
 runtime's chain shares the host stages and differs by the network alone.
 
 jax: CameraPredictor (the jitted network and YOLOv3 decode). onnx / onnx-int8: the export's graph
@@ -91,7 +91,7 @@ def camera_model_setup(name: str, size: int, overrides: dict | None = None):
 
 def camera_chain(image, pipeline) -> list:
     """[(stage, fn(previous output) -> output)] from a CameraImage to its Boxes2D in image pixels,
-    through a predict_camera.CameraPipeline (the JAX predictor or the ONNX Runtime one)."""
+    through a modalities/image/predict.CameraPipeline (the JAX predictor or the ONNX Runtime one)."""
     from ...data.camera.letterbox import letterbox
 
     input_hw = pipeline.input_hw(image.hw)

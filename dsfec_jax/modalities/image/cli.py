@@ -48,7 +48,7 @@ from .predict import CameraPredictor
 
 READS = "whole camera images"
 EVAL_SIZE = 416  # eval / predict: the long side images are letterboxed to (the paper's 416)
-TRAIN_FRAMES = 1000  # street frames generated for training without --frames (~10 frames/s per core)
+TRAIN_FRAMES = 1000  # street frames generated for training without --frames (render rate: docs/camera.md)
 PNG_MIN_SCORE = 0.25  # predictions drawn on a PNG (ultralytics' predict default, as modalities/rd/cli.py's)
 CLASS_FIELDS = CAMERA.weight_fields  # num_classes, class_names: set from the training data
 SYNONYMS = {"synthetic": "street"}  # the commands' default --data is the family's embedded benchmark

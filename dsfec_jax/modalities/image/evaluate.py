@@ -5,7 +5,7 @@ neither TP nor FP: metrics/boxes2d/voc_ap.py) and COCO mAP@[.5:.95] and AP50 thr
 writes them), per class, in percent, on the images' pixel boxes.
 
 The classes scored are the predictor's (`predictor.classes`: the model's, or a data source's names
-through a class map, predict_camera). Ground truth of other classes is left out, since the model
+through a class map, modalities/image/predict.py). Ground truth of other classes is left out, since the model
 cannot name it (a street-trained model on VOC scores car, bus, person and bicycle only), and the
 result counts what was left out per class. A class without non-difficult ground truth in the scored
 images has no AP and stays out of the means (voc_ap, pycocotools).

@@ -7,13 +7,14 @@ input `image` (B, H, W, 3) float32 in [0, 1], the letterboxed image at one fixed
 x sigmoid(class), every anchor of the three scales in decode's order (A = 3 (HW/64 + HW/256 +
 HW/1024): 6,552 at 256 x 416). The letterbox and darknet's post-processing (score > 0.005, per-class
 NMS at IoU 0.45 over the multi-label (anchor, class) candidates, the 300 best; decode.detections)
-stay on the host: ort_camera.OrtCameraPredictor runs predict_camera's CameraPipeline around the graph.
+stay on the host: modalities/image/ort.OrtCameraPredictor runs modalities/image/predict.CameraPipeline
+around the graph.
 
-Why NMS stays on the host (as for the RD family, export_rd.py): the JAX predictor runs this NMS on
-the host too (boxes/nms2d.detect_host), so both runtimes share its code and its kept boxes; a
-compiled NMS (boxes/nms2d.nms_jax, one greedy pass in a `fori_loop`) becomes an ONNX Loop over
-every candidate, measured at 48-52 ms a frame for YOLO-RD's 2,016 candidates in ONNX Runtime
-against 0.3-2.6 ms on the host (export_rd.py), and a camera graph has 32,760 at 256 x 416 with 5
+Why NMS stays on the host (as for the RD family, modalities/rd/export.py): the JAX predictor runs
+this NMS on the host too (boxes/nms2d.detect_host), so both runtimes share its code and its kept
+boxes; a compiled NMS (boxes/nms2d.nms_jax, one greedy pass in a `fori_loop`) becomes an ONNX Loop over
+every candidate, many times slower in ONNX Runtime than on the host for YOLO-RD's 2,016
+candidates (docs/range-doppler.md, "Deploy"), and a camera graph has 32,760 at 256 x 416 with 5
 classes; jax2onnx has no batching rule for that Loop either, so the graph would be batch 1 only.
 
 The network is exported in the operators ONNX has (export.grouped: the depthwise kernels as one

@@ -13,8 +13,8 @@ weights in a run of a few hundred steps, which then scores ~0 whatever it learnt
 
 Multi-scale per profile (MULTI_SCALE, by schedule name): yolo3_paper trains as darknet does, 320-608
 every 10 batches and the last 200 batches at 608; yolo3_quick 320-416 (each size costs a compile of
-the train step, ~50 s on one core of the 2-core CPU for Shuffle-YOLOv3, and the small sizes are the
-cheap ones); any other schedule at 416.
+the train step, the timings: docs/camera.md, "Schedules"; the small sizes are the cheap ones); any
+other schedule at 416.
 """
 
 from __future__ import annotations

@@ -155,7 +155,7 @@ def train_step_fn(config: MonodepthConfig, loss: MonodepthLoss, tx: optax.Gradie
 @functools.lru_cache(maxsize=16)
 def _jitted_step(config: MonodepthConfig, loss: MonodepthLoss, tx: optax.GradientTransformation):
     """One jitted step per (config, loss, optimizer): a resumed or repeated run in the same process
-    reuses its compilation (~10 s on one core even for the tiny test network)."""
+    reuses its compilation (seconds even for the tiny test network; docs/edge-and-map-service.md)."""
     return jax.jit(train_step_fn(config, loss, tx), donate_argnums=0)
 
 

@@ -1,5 +1,5 @@
 """Run a camera export (export_camera) with ONNX Runtime, from images to boxes in image pixels, with
-the interface of the JAX `CameraPredictor` (predict_camera.CameraPipeline: the same letterbox on the
+the interface of the JAX `CameraPredictor` (modalities/image/predict.CameraPipeline: the same letterbox on the
 host, the same darknet post-processing and the same mapping back to the image; only the network and
 decode run in ONNX Runtime).
 

@@ -8,8 +8,8 @@ one batch, and the jitted network compiles once per input shape. `class_map` (mo
 to report, data/camera/sources.class_map) renames the detections into a data source's vocabulary
 and drops classes it does not have; the predictor's `classes` are then the reported names.
 
-`CameraPipeline` is everything but the network: the ONNX Runtime predictor (deploy/ort_camera.py)
-and the bench's chains (deploy/bench/stages_camera.py) run the same letterbox and host
+`CameraPipeline` is everything but the network: the ONNX Runtime predictor (modalities/image/ort.py)
+and the bench's chains (modalities/image/bench.py) run the same letterbox and host
 post-processing around their own network, so every runtime's detections differ by the network alone.
 """
 

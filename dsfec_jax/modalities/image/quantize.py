@@ -3,7 +3,7 @@ street benchmark's train split by default): `quantize_camera(EXPORT_DIR, OUT_DIR
 
 The same scheme as the other families (quantize.quantize_model: QDQ, int8 weights per output
 channel, uint8 activations calibrated over the images); a calibration feed is one image letterboxed
-as the export's deploy.json says (ort_camera.graph_input_hw), exactly what the predictor will feed.
+as the export's deploy.json says (modalities/image/ort.graph_input_hw), exactly what the predictor will feed.
 The YOLOv3 decode (sigmoid, exp, the anchor arithmetic) comes after the last convolution and stays
 float32 (quantize.QUANTIZED_OPS: convolutions and matrix products only).
 """

@@ -1,13 +1,13 @@
 """The training benchmark's batches for camera models (modality 'image': Shuffle-YOLOv3,
 Darknet53-YOLOv3).
 
-Made as train/fit_camera.py makes them: images of the family's embedded benchmark (the street
+Made as modalities/image/fit.py makes them: images of the family's embedded benchmark (the street
 scenes, data seed = the bench's seed) through data.camera.batches.CameraBatchStream, with darknet's
 augmentations, letterboxed into one input size (`settings.image_size` on the long side: the 16:9
 street frames go into 256 x 416 at 416) and padded box targets of the model's classes
 (models/camera/targets.pad_batch). Training draws a new size every 10 batches (multi-scale); the
 bench holds one, since each size is its own compiled step and the figures are per size. The model
-takes the benchmark's classes, as `dsfec train` gives them (cli_camera.with_data_classes). The point
+takes the benchmark's classes, as `dsfec train` gives them (modalities/image/cli.with_data_classes). The point
 settings (window, max_pillars, size_pillars, budget_frames) do not apply; only the
 `batch * distinct_batches` images that are timed are made.
 """

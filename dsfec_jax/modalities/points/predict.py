@@ -133,7 +133,8 @@ def fewest_slots(batch: dict) -> dict:
     """The pillar tensors cut to the smallest bucket (SLOT_BUCKET * 2^k, or all slots) that holds
     every frame's last occupied slot (`pillarize` packs occupied pillars first). The network masks
     the padding, so the outputs are the same; a sparse radar frame then skips most of the slots'
-    pillar-net work (DSFEC-S, a 270-pillar synthetic frame: 28.6 -> 27.2 ms at 1 thread).
+    pillar-net work (the gain: docs/points-deploy.md; `dsfec bench --models dsfec_s --runtimes jax
+    --threads 1` re-measures).
     jax.jit compiles once per bucket; an exported ONNX graph keeps its fixed slot count."""
     slots = batch["mask"].shape[1]
     occupied = np.flatnonzero(np.asarray(batch["mask"]).any(axis=(0, 2)))

@@ -1,5 +1,5 @@
 """The training benchmark's batches for point-cloud models (DSFEC, RadarNeXt; profile/training.py
-times them), made as train/fit.py makes them: frames of the family's embedded benchmark, augmented,
+times them), made as modalities/points/fit.py makes them: frames of the family's embedded benchmark, augmented,
 pillarized for a training window of `settings.window` cells and given the family's targets by
 `data.batches.BatchStream`. The pillar slots are sized on `settings.budget_frames` train frames as
 a training run sizes them (unless `settings.size_pillars` is False). A family whose network takes
@@ -34,7 +34,7 @@ def training_batches(name: str, overrides: dict, settings) -> tuple[zoo.Detector
     used = settings.batch * settings.distinct_batches
     frames = load_frames(family.benchmark, "train", max(used, settings.budget_frames), settings.seed,
                          features=family.points.input_columns)
-    # slots sized as a training run on this benchmark sizes them (train.fit), not on the few frames timed
+    # slots sized as a training run on this benchmark sizes them (modalities/points/fit.py), not on the few frames timed
     windows = window_detectors(cfg, settings.window, frames if settings.size_pillars else None)
     frames = [frames[i] for i in range(used)]
     stream = BatchStream(frames, [PillarSpec.of(w.config) for w in windows], family.points.targets(cfg), settings.batch,

@@ -2,7 +2,7 @@
 numpy: the heat / gray maps fitted to the input size), network_decode (network and DFL decode), nms
 (class-aware NMS, or YOLOv10's top-k).
 
-jax: the network and DFL decode jitted (export_rd.decoded_network), then the compiled post-processing
+jax: the network and DFL decode jitted (modalities/rd/export.decoded_network), then the compiled post-processing
 the JAX predictor runs (class-aware NMS, boxes/nms2d.detect_jax; YOLOv10's top-k) as a second jit.
 onnx / onnx-int8: the export's graph (network + decode; int8 quantizes the network only, calibrated
 on synthetic train RD samples) in ONNX Runtime with intra_op_num_threads = the worker's thread

@@ -11,10 +11,9 @@ infers with. The post-processing stays on the host (models/yolo_rd/decode_host.h
 
 Why NMS is not in the graph: in ONNX Runtime the compiled NMS (boxes/nms2d.nms_jax, one greedy pass
 over all A x nc multi-label candidates in a `fori_loop`) becomes an ONNX Loop of A x nc iterations,
-measured at 48-52 ms per frame (yolov8n, 256 x 64, 1 thread), against 0.3-2.6 ms for the host NMS
-on the same candidates (96 and 2016 of them above conf 0.001; a briefly trained yolov8n leaves a
-median 60: host 0.86 ms). jax2onnx also has no batching rule for its Loop, so the graph would be
-batch 1 only.
+many times slower than the host NMS on the same candidates (the timings: docs/range-doppler.md,
+"Deploy"; `dsfec bench --models yolov8n --runtimes jax,onnx --threads 1` re-measures). jax2onnx
+also has no batching rule for its Loop, so the graph would be batch 1 only.
 
 The fitted input size is part of the graph: deploy.json records the representation (colormap, fit,
 input_hw) that turns a map into exactly that size, and the predictor refuses a map that fits to
@@ -52,7 +51,7 @@ def decoded_network(detector, variables):
 
 def postprocess_kind(detector, variables, specs) -> str:
     """TOP_K for a network with a one-to-one head (YOLOv10: its outputs are a dict, the rule
-    predict_rd.detecting_network follows), else NMS."""
+    modalities/rd/predict.detecting_network follows), else NMS."""
     names = detector.config.input_names
     outputs = jax.eval_shape(lambda v, *maps: detector.apply(v, dict(zip(names, maps))), variables, *specs)
     return TOP_K if isinstance(outputs, dict) else NMS
@@ -94,8 +93,8 @@ def export_rd(detector, variables, out_dir: str | Path, source: dict | None = No
               "postprocess": {"kind": kind, "where": "host", "multi_label": True, "iou_threshold": EVAL_IOU,
                               "score_threshold": EVAL_CONF, "max_detections": EVAL_MAX_DET}}
     # matmul_einsums: the 1x1 convs (run as dots, layers/yolo.PaddedConv) become MatMul, which ORT
-    # runs faster and quantizes (24 of yolov8n's 63 convs). Measured (yolov8n, 256 x 64, 1 thread,
-    # initial weights): FP32 4.90 -> 4.54 ms, INT8 3.29 -> 2.56 ms.
+    # runs faster and quantizes (24 of yolov8n's 63 convs; the timings: docs/range-doppler.md,
+    # "Deploy").
     return write_export(decoded_network(detector, variables), specs, cfg.input_names, OUTPUTS, out_dir, cfg.name,
                         fields, source, jax_export, matmul_einsums=True)
 

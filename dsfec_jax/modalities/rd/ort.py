@@ -1,5 +1,5 @@
 """Run an RD export (export_rd) with ONNX Runtime, from RD samples to boxes in map pixels, with the
-interface of the JAX `RDPredictor` (predict_rd.RDPipeline: the same representations on the host and
+interface of the JAX `RDPredictor` (modalities/rd/predict.RDPipeline: the same representations on the host and
 the same conversion back to map pixels).
 
 The graph gives each anchor's decoded box and class scores; `host_detections` then does on the host

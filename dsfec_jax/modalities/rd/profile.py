@@ -4,7 +4,8 @@
   (Adapter models only: its Stem and Exchangers), `neck` and `head` (counting.part_of): module
   paths say which part a layer belongs to, so the Adapter is a stage of its own although its
   Exchangers run between backbone layers. For the same reason it cannot be timed alone: latency
-  stages are `features` (backbone + Adapter), `neck` and `head` (net.py's stage methods).
+  stages are `features` (backbone + Adapter), `neck` and `head` (models/yolo_rd/net.py's stage
+  methods).
 - Inputs. The real input size: 256 x 64 RD maps (`cfg.dummy_inputs`, the synthetic benchmark's and
   RADDet's map size), batch 1, every representation the network reads (heat, and gray for the Adapter).
 - Params, two conventions. `params` counts the trainable 'params' collection, as for every family.
@@ -13,7 +14,7 @@
   n is both to the printed digits): every BatchNorm folded into the conv before it (its scale and
   shift become the conv's bias: C parameters fewer per BN), every RepConvN's 1x1 branch folded into
   its 3x3 and every RepVGGDW's 3x3 branch into its 7x7 (the folded kernel and one bias fewer).
-- GFLOPs. 2 x MACs of the conv layers (counting.py), as ultralytics' thop count (MACs x 2;
+- GFLOPs. 2 x MACs of the conv layers (profile/counting.py), as ultralytics' thop count (MACs x 2;
   ../shared/docs/rd-yolo-camera-facts.md §2): pooling, upsampling, the attention's matmuls and the
   parameter-free DFL decode are not counted. YOLOv10n counts both of its heads, as its trained
   network computes both (inference decodes only the one-to-one maps). `ultralytics_gflops` counts
@@ -60,7 +61,7 @@ def size_fields(variables: dict) -> dict:
 
 
 def latency_stages(detector, variables, inputs) -> dict:
-    """Jitted stage callables (not blocking; latency.py wraps them): features (backbone with the
+    """Jitted stage callables (not blocking; profile/latency.py wraps them): features (backbone with the
     Adapter's exchanges), neck, head, each on the previous stage's output."""
     feats_fn = jax.jit(lambda v, x: detector.apply_method(v, "features", x))
     neck_fn = jax.jit(lambda v, f: detector.apply_method(v, "neck_outputs", f))

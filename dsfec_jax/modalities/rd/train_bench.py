@@ -1,6 +1,6 @@
 """The training benchmark's batches for range-Doppler models (modality 'rd': the YOLO-RD family).
 
-Made as train/fit_rd.py makes them: samples of the family's embedded benchmark
+Made as modalities/rd/fit.py makes them: samples of the family's embedded benchmark
 (data/rd/sources.load_rd_samples, data seed = the bench's seed), augmented, in both representations
 (heat and gray), padded to a fixed number of boxes by data.rd.batches.RDBatchStream. The bench
 settings of the point families (window, max_pillars, size_pillars, budget_frames) do not apply: an
@@ -16,7 +16,7 @@ from ... import zoo
 from ...profile.training import model_names
 from ...data.rd.representations import RDRepresentation
 
-# train/fit_rd.py's default: the maps as they are (fit='pad'; 256 x 64 is a multiple of the strides)
+# modalities/rd/fit.py's default: the maps as they are (fit='pad'; 256 x 64 is a multiple of the strides)
 REPRESENTATION = RDRepresentation()
 
 

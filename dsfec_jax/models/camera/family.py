@@ -1,9 +1,9 @@
 """The camera family's record: what shared code needs to know of Shuffle-YOLOv3 and Darknet53-YOLOv3.
 
 The family reads RGB images (modality 'image'): its data (data/camera: the street benchmark, VOC),
-predictor (predict_camera), metric (evaluate_camera: VOC mAP@0.5 as voc_eval.py, COCO AP through
-pycocotools) and training (train/fit_camera: multi-scale letterboxed batches) live in the image
-rooms, not in the point-cloud ones. Its loss is darknet's YOLOv3 loss (loss.py, yolov3-voc.cfg's
+predictor (modalities/image/predict.py), metric (modalities/image/evaluate.py: VOC mAP@0.5 as
+voc_eval.py, COCO AP through pycocotools) and training (modalities/image/fit.py: multi-scale
+letterboxed batches) live in the image rooms, not in the point-cloud ones. Its loss is darknet's YOLOv3 loss (loss.py, yolov3-voc.cfg's
 ignore_thresh 0.5); its `paper` profile is yolov3-voc.cfg's SGD schedule (train/schedules.py).
 
 Search trials (search/trial.py) load point frames or RD samples only, so the family has no search
@@ -47,7 +47,7 @@ FAMILY = Family(
     head_classes=head_classes, metric=CAMERA_VOC_PROTOCOL, modality="image",
     schedules={"quick": "yolo3_quick", "paper": "yolo3_paper"}, recipes={},
     stem_memory=paper_memory_mib, memory_convention=MEMORY_CONVENTION,
-    weight_fields=("num_classes", "class_names"),  # `dsfec train` takes them from the data (cli_camera)
+    weight_fields=("num_classes", "class_names"),  # `dsfec train` takes them from the data (modalities/image/cli.py)
 )
 
 

@@ -6,7 +6,8 @@ Ours (footprint.py, tests/models/camera/test_camera_models.py), 20 classes, 416 
   a weights file of 248,007,048 bytes, exactly yolov3.weights), 32.714 G MACs = 65.43 GFLOPs
   (darknet's 2 x MACs; 65.86 at 80 classes, the "65.9" usually quoted), 246.5 MB fp32.
 - Shuffle-YOLOv3 (our layout): 1,660,353 params (6.64 MB), 1.820 G MACs = 3.64 GFLOPs: the paper's
-  25 GFLOPs and 45.5 MB cannot come from shuffle units at Table 1's widths (see the README).
+  25 GFLOPs and 45.5 MB cannot come from shuffle units at Table 1's widths (docs/camera.md,
+  "Camera detectors").
 """
 
 # Table 1 ("Total computation") and Sec. 2.2: GFLOPs at 416 x 416

@@ -21,14 +21,14 @@ Default size, chosen for this project's 2-core CPU and the street benchmark (416
   pedestrian (0.55 x 1.72 m) 0.9 x 2.8 px, and the disparity fx * B / Z is 0.87 px (1.6 at 416):
   still inside the network's reach, since the bilinear warp makes the loss see sub-pixel
   disparities, but 40 m is about the limit. 160 x 288 (1.1 px at 40 m) costs twice the time per
-  step on this CPU (measured: 2.1-3.0 s vs 4.3-6.1 s per batch-8 step on one shared core), i.e.
+  step on this CPU (measured: docs/edge-and-map-service.md), i.e.
   half the training in the same half hour. monodepth used 256 x 512 on KITTI (fx = 721 px at 1242:
   3.1 px of disparity at 40 m at 512 wide).
 - encoder widths 16-32-64-128-256 (monodepth's VGG: 32-64-128-256-512-512-512 over 7 levels) and
   kernels 7-5-3-3-3 as monodepth's first five: 2.0 M parameters (monodepth's VGG: ~31 M) and
   ~1.5 GFLOPs per image; half an hour on one core trains ~800 batch-8 steps. Five levels, not
-  seven: 128 / 2**5 = 4, and a deeper encoder would need padding. The measured figures are in the
-  issue-25 note.
+  seven: 128 / 2**5 = 4, and a deeper encoder would need padding. The measured figures are in
+  docs/edge-and-map-service.md.
 """
 
 from __future__ import annotations

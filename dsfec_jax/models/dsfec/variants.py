@@ -1,7 +1,7 @@
 """The named DSFEC-family variants of the paper (Table 1) as data.
 
 The paper gives block counts, not widths. The sizes are our own fit of its published Tables 1-3
-(params, GFLOPs, Table 2 memory; README, "How the sizes were fitted"). Baseline and DSFEC-L are
+(params, GFLOPs, Table 2 memory; docs/dsfec-sizes.md, "How the sizes were fitted"). Baseline and DSFEC-L are
 PIXOR-width networks: stage widths 96/192/256/384 and heads of 4 x 3x3 conv 96, as in the public
 PIXOR re-implementations (e.g. github philip-huang/PIXOR, srcs/model.py); by our fit stage 1 runs
 at the full 160x160 grid and the heads at 80x80, with a (192, 128, 64) top-down neck and the

@@ -2,8 +2,8 @@
 range-Doppler maps (with or without the Adapter).
 
 The family reads RD maps as images (modality 'rd'): its data, predictor, metric and export live in
-the image-like rooms (data/rd, predict_rd, evaluate_rd, metrics/boxes2d, deploy/export_rd), not in
-the point-cloud ones. Its losses are ultralytics' (loss.yolo_loss: YOLOv8's for v8 and v9t, the dual
+the image-like rooms (data/rd; modalities/rd/predict.py, evaluate.py, export.py; metrics/boxes2d),
+not in the point-cloud ones. Its losses are ultralytics' (loss.yolo_loss: YOLOv8's for v8 and v9t, the dual
 one-to-many + one-to-one loss for v10n); its schedules are ultralytics' SGD recipe.
 """
 

@@ -60,8 +60,8 @@ class YoloRDNet(nn.Module):
             raise ValueError(f"{self.cfg.name}: inputs {sorted(inputs)} lack {missing}; it reads {self.cfg.input_names}")
         return self.head(self.neck(self.features(inputs, train), train), train)
 
-    # Stages for the profiler (profile/rd.py times each alone): `features`, then these two. The
-    # Adapter runs inside `features` (its Exchangers are interleaved with the backbone's layers).
+    # Stages for the profiler (modalities/rd/profile.py times each alone): `features`, then these
+    # two. The Adapter runs inside `features` (its Exchangers are interleaved with the backbone's layers).
     def neck_outputs(self, feats, train: bool = False):
         """(N3, N4, N5) of the neck from the backbone's (P3, P4, P5)."""
         return self.neck(feats, train)

@@ -21,7 +21,7 @@ from ....core.columns import NUSCENES_FEATURES, VOD_FEATURES
 from ....core.grid import DSFEC_GRID, VOD_GRID, Grid
 
 CLASSES = ("car", "truck", "pedestrian", "bicycle")
-# The nuScenes radar columns the DSFEC models read (models/dsfec.py RADAR_FEATURES; data may not
+# The nuScenes radar columns the DSFEC models read (models/dsfec/net.py RADAR_FEATURES; data may not
 # import models, so the tuple is repeated here and a test pins the two together).
 RADAR_FEATURES = NUSCENES_FEATURES
 # point_format -> the point columns a frame carries. "vod": VoD's .bin layout (docs/SENSORS_AND_DATA.md),
@@ -162,7 +162,7 @@ def radar4d_config(difficulty: str = "normal", **overrides) -> SyntheticConfig:
     bumper at ~13 Hz, 5-scan accumulation, camera FOV +-32 deg), docs/ANNOTATION.md (objects
     within 50 m and partly or fully in the camera view are annotated), PP-Radar.md (the VoD
     baseline keeps only points in the camera view, OpenPCDet FOV_POINTS_ONLY). "example set":
-    the three public VoD frames in shared/data/vod, measured with data/kitti.py. Choices without
+    the three public VoD frames in shared/data/vod, measured with data/points/kitti.py. Choices without
     a source are marked "assumed".
     """
     values = dict(
