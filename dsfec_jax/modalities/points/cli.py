@@ -66,7 +66,7 @@ def train(args, cfg, overrides: dict, schedule, info: dict) -> dict:
 
 def _predictor(args, cfg, threshold: float):
     if args.runtime == "onnx":
-        from ...deploy.ort import OrtPredictor
+        from .ort import OrtPredictor
 
         return onnx_predictor(args, lambda export_dir: OrtPredictor(export_dir, score_threshold=threshold))
     try:
@@ -128,7 +128,7 @@ def ship_predictor(cfg, source: Path, info: dict):
 
 def export(args, cfg, command: str) -> dict:
     """`dsfec export` of a point model: deploy.export (network and per-head top-k decode; ONNX and jax.export)."""
-    from ...deploy.export import export as export_points
+    from .export import export as export_points
 
     path = export_weights(args)
     detector = zoo.Detector(cfg)
@@ -140,7 +140,7 @@ def export(args, cfg, command: str) -> dict:
 def quantize(args) -> dict:
     """`dsfec quantize` of a point export: static INT8 calibrated on synthetic train frames."""
     from ...data.points.sources import load_frames
-    from ...deploy.quantize import quantize as quantize_points
+    from .quantize import quantize as quantize_points
 
     return quantize_points(args.onnx, args.out, load_frames("synthetic", "train", args.calib_frames, args.seed),
                            calibration=args.calibration)

@@ -96,8 +96,8 @@ def test_onnx_boxes_and_scores_match_the_jitted_decode(name, exports, frames):
 def test_ort_predictor_detections_equal_the_camera_predictor(exports, frames):
     """The same letterbox, NMS and mapping back on both sides: the same boxes, in image pixels."""
     det, variables, path = exports["shuffle_yolov3"]
-    ours = OrtCameraPredictor(path).predict_images(frames)
-    ref = CameraPredictor(det, variables, size=SIZE).predict_images(frames)
+    ours = OrtCameraPredictor(path).predict_samples(frames)
+    ref = CameraPredictor(det, variables, size=SIZE).predict_samples(frames)
     assert ours.keys() == ref.keys() == {f.image_id for f in frames}
     for image_id, want in ref.items():
         got = ours[image_id]
@@ -156,7 +156,7 @@ def test_int8_is_close_to_float_with_the_decode_in_float(exports, frames, tmp_pa
           f"(max {np.abs(int8[1] - fp32[1]).max():.3f}), median box difference "
           f"{np.median(np.abs(int8[0] - fp32[0])):.2f} px")
     assert 0 < score_error < 0.03
-    detections = OrtCameraPredictor(tmp_path).predict_images(frames)
+    detections = OrtCameraPredictor(tmp_path).predict_samples(frames)
     assert all(len(d) > 0 and np.isfinite(d.xyxy).all() for d in detections.values())
 
 
