@@ -126,12 +126,6 @@ def deploy(detector: Detector, variables: dict) -> tuple[Detector, dict]:
     return Detector(fused), family.deploy_variables(detector.config, variables)
 
 
-def input_columns(name: str) -> str:
-    """The point columns variant `name` reads from a source (data.points.sources.load_frames'
-    features): a source's own ('native': VoD's 7, TJ4D's 8) or the nuScenes ones ('dsfec')."""
-    return family_of(name).points.input_columns
-
-
 def create(name: str, /, **overrides) -> Detector:
     """A detector of the registered variant `name`, any config field overridden."""
     if name in AUXILIARY_REGISTRY:

@@ -2,79 +2,28 @@
 
 from __future__ import annotations
 
+from ...data.rd.sources import load_rd_samples
+from ...profile.counting import part_of
 from ..base import Commands, Modality
 from . import cli
+from .bench import rd_chains
 from .evaluate import PROTOCOLS
+from .export import export_rd
 from .fit import fit_rd
+from .ort import OrtRDPredictor
+from .predict import RDPredictor
+from .profile import latency_stages, size_fields
+from .quantize import quantize_rd
+from .train_bench import note, training_batches
 from .zoo_table import TABLE as ZOO_TABLE
 
-
-def load_samples(family, source: str, split: str, count: int | None, seed: int):
-    from ...data.rd.sources import load_rd_samples
-    return load_rd_samples(source, split, count, seed)
-
-
-def predictor(detector, variables, **options):
-    from .predict import RDPredictor
-    return RDPredictor(detector, variables, **options)
-
-
-def ort_predictor(export_dir, **options):
-    from .ort import OrtRDPredictor
-    return OrtRDPredictor(export_dir, **options)
-
-
-def export(detector, variables, out_dir, **options):
-    from .export import export_rd
-    return export_rd(detector, variables, out_dir, **options)
-
-
-def quantize(export_dir, out_dir, samples, **options):
-    from .quantize import quantize_rd
-    return quantize_rd(export_dir, out_dir, samples, **options)
-
-
-def bench_chains(name, runtimes, threads, workdir, repeats):
-    from .bench import rd_chains
-    return rd_chains(name, runtimes, threads, workdir, repeats)
-
-
-def stage_name(path):
-    from ...profile.counting import part_of
-    return part_of(path)
-
-
-def latency_stages(detector, variables, inputs):
-    from .profile import latency_stages as stages
-    return stages(detector, variables, inputs)
-
-
-def size_fields(variables):
-    from .profile import size_fields as fields
-    return fields(variables)
-
-
-def train_bench_fields(name, settings):
-    return {}
-
-
-def train_bench_batches(name, overrides, settings):
-    from .train_bench import training_batches
-    return training_batches(name, overrides, settings)
-
-
-def train_bench_note(records, settings):
-    from .train_bench import note
-    return note(records, settings)
-
-
 MODALITY = Modality(
-    name="rd", noun="sample", load_samples=load_samples, predictor=predictor, ort_predictor=ort_predictor,
-    protocols=PROTOCOLS, fit=fit_rd,
+    name="rd", noun="sample", load_samples=lambda family, *where: load_rd_samples(*where),
+    predictor=RDPredictor, ort_predictor=OrtRDPredictor, protocols=PROTOCOLS, fit=fit_rd,
     commands=Commands(refuse=cli.refuse, config_fields=cli.config_fields, train=cli.train,
                       eval_or_predict=cli.eval_or_predict, ship_predictor=cli.ship_predictor, export=cli.export,
                       quantize=cli.quantize),
-    export=export, quantize=quantize, bench_chains=bench_chains, stage_name=stage_name,
-    latency_stages=latency_stages, size_fields=size_fields, train_bench_fields=train_bench_fields,
-    train_bench_batches=train_bench_batches, train_bench_note=train_bench_note, zoo_table=ZOO_TABLE,
+    export=export_rd, quantize=quantize_rd, bench_chains=rd_chains, stage_name=part_of,
+    latency_stages=latency_stages, size_fields=size_fields, train_bench_fields=lambda name, settings: {},
+    train_bench_batches=training_batches, train_bench_note=note, zoo_table=ZOO_TABLE,
 )
