@@ -19,11 +19,15 @@ from .cli import parse, parser, run_search
 from .space import Axis, candidates
 
 
-def main(argv=None) -> int:
+def arguments(argv=None):
     p = parser("python -m search.blocks", __doc__, strategy="oneshot")
     p.add_argument("--stage", type=int, required=True, choices=(1, 2, 3, 4))
     p.add_argument("--values", default="1,2,3,4,5,6", help="block counts to try")
-    args = parse(p, argv)
+    return parse(p, argv)
+
+
+def main(argv=None) -> int:
+    args = arguments(argv)
     values = tuple(int(v) for v in args.values.split(","))
     axis = Axis(f"stage{args.stage}_blocks", values)
     base_blocks = zoo.config(args.base).stage_blocks[args.stage - 1]

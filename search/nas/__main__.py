@@ -33,8 +33,8 @@ from .spaces import SPACES
 from .spos import SAMPLINGS
 
 
-def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
+def parse(argv: list[str]) -> argparse.Namespace:
+    """The command's arguments, checked (argument errors exit here, before anything trains)."""
     p = argparse.ArgumentParser(prog="python -m search.nas", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--space", required=True, choices=sorted(SPACES))
@@ -77,6 +77,12 @@ def main(argv=None) -> int:
         p.error("--record keeps the ranking study: it goes with --standalone K or --spread N")
     if args.workers is not None and (args.backend != "ray" or args.workers < 1):
         p.error("--workers N (N >= 1) goes with --backend ray")
+    return args
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = parse(argv)
     limits = {k: v for k, v in (("params", args.max_params), ("gflops", args.max_gflops),
                                 ("latency_ms", args.max_latency_ms)) if v is not None}
     run_dir = args.run_dir or f"runs/nas/{args.space}_{args.profile}_{args.strategy}"
