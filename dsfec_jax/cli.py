@@ -268,10 +268,13 @@ def ship_source(args) -> tuple[Path, dict]:
 def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
     """What a weights manifest records: the family's protocol on `frames` items of `split` of its
     embedded synthetic benchmark (data seed 0), the keys its protocol keeps."""
+    from .core import progress
     from .modalities.registry import modality_named, protocol
 
-    data = modality_named(family.modality).load_samples(family, family.benchmark, split, frames, 0)
-    scores, _ = protocol(family.metric.name).validate(predictor, data)
+    with progress.stage(f"measuring {family.metric.name} on {frames} {split} frames of {family.benchmark} "
+                        f"for the manifest"):
+        data = modality_named(family.modality).load_samples(family, family.benchmark, split, frames, 0)
+        scores, _ = protocol(family.metric.name).validate(predictor, data)
     return {k: scores[k] for k in family.metric.keep} | {
         "frames": frames, "data_seed": 0, "data": family.benchmark, "protocol": family.metric.name}
 

@@ -76,7 +76,9 @@ def test_ship_measures_a_radarnext_run_with_the_vod_protocol(monkeypatch, tmp_pa
     (run / "run.json").write_text(json.dumps({"seed": 0, "overrides": {"max_pillars": 96}}))
     assert cli.main(["ship", "--model", "tiny_radarnext", "--run-dir", str(run), "--checkpoint", "last",
                      "--frames", "2", "--out-dir", str(tmp_path / "weights")]) == 0
-    capsys.readouterr()
+    said = capsys.readouterr().err
+    for split in ("val", "test"):  # never silent while it measures (issue 51)
+        assert f"measuring vod on 2 {split} frames of synthetic4d for the manifest: done in" in said, said
     measured = json.loads((tmp_path / "weights" / "tiny_radarnext.msgpack.json").read_text())["measured"]
     for split in ("val", "test"):
         assert measured[split]["protocol"] == "vod" and measured[split]["data"] == "synthetic4d"

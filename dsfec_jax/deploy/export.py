@@ -17,7 +17,7 @@ from pathlib import Path
 import jax
 
 from .. import zoo
-from ..core import atomic
+from ..core import atomic, progress
 from ..core.provenance import versions
 
 
@@ -78,11 +78,13 @@ def write_export(fn, specs: list, input_names, output_names, out_dir: str | Path
     and the versions -> {'onnx', 'jax_export' (when written), 'manifest'}. `matmul_einsums`: see
     onnx_model."""
     out_dir = Path(out_dir)
-    model = onnx_model(fn, specs, input_names, output_names, name, matmul_einsums)
+    with progress.stage(f"exporting {name} to ONNX (tracing it with jax2onnx)"):
+        model = onnx_model(fn, specs, input_names, output_names, name, matmul_einsums)
     atomic.write_bytes(out_dir / "model.onnx", model.SerializeToString())
     paths = {"onnx": out_dir / "model.onnx"}
     if jax_export:
-        exported = jax.export.export(jax.jit(fn))(*specs)
+        with progress.stage(f"exporting {name} with jax.export (lowering it to StableHLO)"):
+            exported = jax.export.export(jax.jit(fn))(*specs)
         atomic.write_bytes(out_dir / "model.jax_export", exported.serialize())
         paths["jax_export"] = out_dir / "model.jax_export"
     atomic.write_json(out_dir / "deploy.json", {

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core import atomic
+from ..core import atomic, progress
 from .ort import read_manifest
 
 QUANTIZED_OPS = ["Conv", "ConvTranspose", "MatMul", "Gemm"]
@@ -72,9 +72,11 @@ def quantize_model(src: str | Path, dst: str | Path, feeds: list[dict], per_chan
         unfold_zeros(prepared)
         # U8S8 (uint8 activations, int8 weights): ORT's scheme for x86; int8 activations fail to
         # load in ORT 1.31 on jax2onnx's opset-23 graph (QuantizeLinear zero-point type mismatch)
-        quantize_static(str(prepared), str(quantized), Reader(), quant_format=QuantFormat.QDQ,
-                        op_types_to_quantize=QUANTIZED_OPS, per_channel=per_channel,
-                        activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8, calibrate_method=method)
+        with progress.stage(f"quantizing to INT8 ({calibration} ranges calibrated on {len(feeds)} inputs)"):
+            quantize_static(str(prepared), str(quantized), Reader(), quant_format=QuantFormat.QDQ,
+                            op_types_to_quantize=QUANTIZED_OPS, per_channel=per_channel,
+                            activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+                            calibrate_method=method)
         atomic.write_bytes(Path(dst), quantized.read_bytes())
 
 

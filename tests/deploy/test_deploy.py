@@ -2,6 +2,7 @@
 (shifted kernel) on synthetic and real frames, for every registered model."""
 
 import json
+import re
 from pathlib import Path
 
 import jax
@@ -148,9 +149,12 @@ def shipped_s_export(tmp_path_factory):
 
     from dsfec_jax.cli import main
 
-    out, printed = tmp_path_factory.mktemp("dsfec_s") / "fp32", io.StringIO()
-    with contextlib.redirect_stdout(printed):
+    out, printed, said = tmp_path_factory.mktemp("dsfec_s") / "fp32", io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(said):
         assert main(["export", "--model", "dsfec_s", "--out", str(out), "--max-pillars", "512"]) == 0
+    # the minute of tracing is never silent (issue 51): each stage says what it does and its time
+    assert re.search(r"exporting dsfec_s to ONNX .*: done in [\d.]+ s", said.getvalue()), said.getvalue()
+    assert "exporting dsfec_s with jax.export" in said.getvalue()
     return out, json.loads(printed.getvalue())
 
 
@@ -217,7 +221,9 @@ def test_int8_quantization_is_smaller_and_keeps_the_detections(shipped_s_export,
 
     fp32 = shipped_s_export[0]
     assert main(["quantize", "--onnx", str(fp32), "--out", str(tmp_path / "int8"), "--calib-frames", "8"]) == 0
-    out = json.loads(capsys.readouterr().out)
+    printed = capsys.readouterr()
+    out = json.loads(printed.out)
+    assert "quantizing to INT8 (minmax ranges calibrated on 8 inputs): done in" in printed.err
     assert out["int8_bytes"] < 0.6 * out["fp32_bytes"]
     ops = {n.op_type for n in onnx.load(str(tmp_path / "int8" / "model.onnx")).graph.node}
     assert {"QuantizeLinear", "DequantizeLinear"} <= ops
