@@ -124,8 +124,12 @@ def run_depth(args) -> int:
     from .modalities.image.depth import load_depth_predictor
     from .modalities.image.fit_depth import evaluate_dense
 
+    from tqdm import tqdm
+
     predictor = load_depth_predictor(args.weights or zoo.shipped_weights(DEPTH_MODEL))
-    scores = evaluate_dense(predictor, StreetDataset(StreetConfig(), "test", args.seed, args.frames or 50))
+    frames = StreetDataset(StreetConfig(), "test", args.seed, args.frames or 50)
+    # the first frame compiles the network: the bar says so by its rate, never silent (stderr)
+    scores = evaluate_dense(predictor, tqdm(frames, desc="depth eval (street test frames)", total=len(frames)))
     print(json.dumps(scores, indent=1) if args.json else "  ".join(f"{k} {v:.4f}" for k, v in scores.items()))
     return 0
 

@@ -92,3 +92,14 @@ def test_training_lowers_the_loss_repeats_and_resumes_exactly(tmp_path):
     assert [r["command"] for r in chain[0]["init_chain"]] == ["dsfec depth train a"]
     with pytest.raises(ValueError, match="finished"):
         ship_depth_weights(tmp_path / "e", tmp_path / "none.msgpack", "")
+
+
+def test_depth_eval_command_shows_its_progress_and_prints_the_metrics(capsys):
+    """`dsfec depth eval` compiles the network on its first frame: a bar on stderr says how far
+    it is (issue 51: never silent), stdout stays the metrics' JSON."""
+    from dsfec_jax import cli
+
+    assert cli.main(["depth", "eval", "--frames", "2", "--json"]) == 0
+    printed = capsys.readouterr()
+    assert json.loads(printed.out)["images"] == 2
+    assert "depth eval (street test frames)" in printed.err and "2/2" in printed.err
