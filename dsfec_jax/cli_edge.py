@@ -218,10 +218,14 @@ def run_edge_command(args) -> int:
             uplink = Uplink(args.server, Path(args.out) / "queue", token=read_token(args), max_queued=args.max_queued)
         except (OSError, ValueError) as err:
             sys.exit(f"dsfec edge: {err}")
+    from tqdm import tqdm
+
     try:
         recording = {"device": args.device,
                      "source": str(Path(args.frames).resolve()) if args.frames else info["drive"]}
-        summary = run_edge(frames, pipeline, args.out, uplink, info, truth_origin, recording=recording)
+        with tqdm(desc="edge frames placed", unit="frame") as bar:  # stderr; the first frame compiles
+            summary = run_edge(frames, pipeline, args.out, uplink, info, truth_origin, recording=recording,
+                               progress=lambda done, batch: bar.update(1))
     except ValueError as err:  # a batches.jsonl, run.json or queued file changed by hand; a bad depth file
         sys.exit(f"dsfec edge: {err}")
     timing = summary["timing_this_run"]
@@ -270,6 +274,9 @@ def synthetic_drive(args):
     from .data.camera.street import StreetConfig, generate_drive
     from .edge.frames import DRIVE_EPOCH_S
 
+    from .core import progress
+
     cfg = StreetConfig()
-    drive = generate_drive(cfg, "test", args.drive, args.seed, args.drive_frames)
+    with progress.stage(f"rendering synthetic drive {args.drive} ({args.drive_frames} frames)"):
+        drive = generate_drive(cfg, "test", args.drive, args.seed, args.drive_frames)
     return drive, cfg.camera_model(), cfg.baseline_m, DRIVE_EPOCH_S

@@ -2,6 +2,7 @@
 
 import csv
 import json
+import re
 
 import numpy as np
 import pytest
@@ -156,7 +157,7 @@ def test_network_depth_reads_a_fraction_of_the_width_as_pixels():
     assert np.allclose(calibrated(EdgeFrame("x", 0.0, np.zeros((cam.height, cam.width, 3), np.uint8)), cam), depth / 2)
 
 
-def test_cli_edge_over_a_folder_with_user_depth(drive, frames, tmp_path, monkeypatch):
+def test_cli_edge_over_a_folder_with_user_depth(drive, frames, tmp_path, monkeypatch, capsys):
     from dsfec_jax.cli import main
 
     d = write_folder(tmp_path, frames)
@@ -174,7 +175,9 @@ def test_cli_edge_over_a_folder_with_user_depth(drive, frames, tmp_path, monkeyp
         stopped = json.loads((out / "edge.json").read_text())
         assert stopped["uplink"]["queued"] == stopped["frames_placed"] >= 1 and server.stored == {}
         monkeypatch.setenv(TOKEN_ENV, "tok-7")
+        capsys.readouterr()
         assert main(command + ["--server", server.url]) == 0
+    assert re.search(r"edge frames placed: \d+frame", capsys.readouterr().err)  # a bar on stderr (issue 51)
     summary = json.loads((out / "edge.json").read_text())
     assert summary["frames_placed"] == 4 and summary["timing_this_run"]["frames_per_s"] > 0
     assert summary["uplink"]["delivered_all"] and sorted(server.stored) == [b["batch_id"] for b in done_batches(out)]
