@@ -16,7 +16,10 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from tqdm import tqdm
+
 from ..core import atomic
+from ..core.progress import quiet
 
 # A command reads every file before it predicts (so a bad one stops it before anything is written):
 # the bound keeps that pass, and a mistyped glob such as `/**`, from walking a whole disk.
@@ -86,9 +89,10 @@ def _paths_of(pattern: str, suffixes: tuple[str, ...], limit: int) -> list[Path]
 def read_all(reader: FileReader, paths: Sequence[Path], cfg, columns: str | None = None) -> Sequence:
     """Every file read and checked, in order (InputFileError names the first bad one); each item's
     id is its path (str), the key its detections come back under."""
+    checking = tqdm(paths, desc="reading --input", unit="file", disable=quiet())
     if not reader.lazy:
-        return [reader.read(Path(p), cfg, columns) for p in paths]
-    for p in paths:
+        return [reader.read(Path(p), cfg, columns) for p in checking]
+    for p in checking:
         reader.read(Path(p), cfg, columns)  # checked now, so a bad file stops the command before any write
     return LazyItems(reader, [Path(p) for p in paths], cfg, columns)
 

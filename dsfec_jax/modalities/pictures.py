@@ -13,6 +13,9 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 import numpy as np
+from tqdm import tqdm
+
+from ..core.progress import quiet
 
 # the predict pictures' default: ultralytics' predict confidence (ultralytics/ultralytics:
 # ultralytics/engine/predictor.py sets conf 0.25 when none is given); at the evaluation thresholds
@@ -56,7 +59,7 @@ def planned(args, items, detections: dict, ident: Callable) -> Iterator[tuple]:
     if not args.png_dir:
         return
     names = picture_names(detections)
-    for i in range(len(items)):
+    for i in tqdm(range(len(items)), desc="figures", unit="figure", disable=quiet()):
         item = items[i]
         key = ident(item)
         keep, note = drawn(detections[key].scores, args.png_min_score)

@@ -84,6 +84,9 @@ def test_point_files_are_read_in_the_models_columns(tmp_path):
     assert frame.points[:, 3].tolist() == pytest.approx(points[:, 3].tolist())  # RCS -> rcs
     named = POINTS.read(tmp_path / "scan.bin", zoo.config("dsfec_s"), ",".join(VOD_FEATURES))
     np.testing.assert_array_equal(named.points, frame.points)
+    native = POINTS.read(tmp_path / "scan.bin", zoo.config("radarnext_fpn"), None)  # RadarNeXt: its own columns
+    assert native.point_features == VOD_FEATURES
+    np.testing.assert_array_equal(native.points, points)
 
 
 def test_hostile_point_files_are_named(tmp_path):
