@@ -136,6 +136,8 @@ def refuse_with_input(args) -> None:
         if getattr(args, "columns", None):
             sys.exit("dsfec predict: --columns says the layout of --input .bin files; give --input")
         return
+    if Path(args.out).is_dir():
+        sys.exit(f"dsfec predict: --out {args.out} is a folder; give the JSON file to write")
     clashing = sorted(given & {"--data", "--split", "--frames", "--gt-out"})
     if clashing:
         sys.exit(f"dsfec predict: {', '.join(clashing)} read a data source; --input files are read as they are "

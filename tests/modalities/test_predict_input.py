@@ -162,6 +162,8 @@ def test_a_bad_file_stops_predict_before_anything_is_written(tmp_path, monkeypat
     with pytest.raises(SystemExit, match=r"--data, --gt-out read a data source"):
         cli.main(["predict", "--model", "yolov8n", "--input", str(folder), "--data", "synthetic", "--gt-out", "g",
                   "--out", str(out)])
+    with pytest.raises(SystemExit, match=r"--out .* is a folder; give the JSON file to write"):
+        cli.main(["predict", "--model", "yolov8n", "--input", str(folder), "--out", str(tmp_path)])
     with pytest.raises(SystemExit, match=r"--columns says the layout of --input .bin files; give --input"):
         cli.main(["predict", "--model", "dsfec_s", "--columns", "vod", "--out", str(out)])
     assert not out.exists()
