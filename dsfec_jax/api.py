@@ -32,3 +32,14 @@ def load(model, /, weights: str | Path | None = None, predictor_options: dict | 
         cfg = model
     detector, variables = zoo.trained_detector(cfg, weights)
     return modality_of(cfg).predictor(detector, variables, **(predictor_options or {}))
+
+
+def read_files(model, *paths: str | Path, columns: str | None = None):
+    """A user's own files as the model's inputs, ready for `predictor.predict_samples(items)` (ids: the
+    paths): camera images, radar point clouds (.pcd, .bin with `columns` = vod | tj4d | names), RD
+    maps or raw TI ADC captures (.npy). `paths`: files, folders or globs (modalities/files.py);
+    InputFileError names a bad file. `model`: a zoo name or a config, as for `load`."""
+    from .modalities.files import read_files as read
+
+    cfg = zoo.config(model) if isinstance(model, str) else model
+    return read(modality_of(cfg).files, [str(p) for p in paths], cfg, columns)

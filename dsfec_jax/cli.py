@@ -10,6 +10,7 @@ thin commands over the library, the same flags for every family.
     dsfec train   --model shuffle_yolov3 --data street --schedule quick --run-dir runs/sy3 [--steps N]
     dsfec eval    --model shuffle_yolov3 --weights runs/sy3/checkpoints/best.msgpack --data voc:DIR --split all
     dsfec export  --model shuffle_yolov3 --weights runs/sy3/checkpoints/best.msgpack --out exports/sy3 [--size 416]
+    dsfec predict --model shuffle_yolov3 --input photos/ "more/*.jpg" --out dets.json --png-dir png   # your own files
 
 Each command resolves the model's config once (--model, --set and the fields the modality's flags
 or data decide), then hands it to the verb of the config's Modality record (modalities/registry):
@@ -156,13 +157,23 @@ def parse(argv=None) -> argparse.Namespace:
                        help="onnx: run an exported model (--onnx DIR from `dsfec export`) with ONNX Runtime")
         q.add_argument("--onnx", default=None, help="with --runtime onnx: the export directory")
         if name == "predict":
+            q.add_argument("--input", nargs="+", action="extend", default=None, metavar="PATH",
+                           help="your own files instead of --data: files, folders or globs (sorted, at most 2000 "
+                                "files); points: .pcd (nuScenes radar) or .bin (VoD / TJ4DRadSet rows, see "
+                                "--columns); range-Doppler: .npy maps (256 x 64 float) or raw TI ADC captures "
+                                "(complex .npy); camera: .jpg/.jpeg/.png. --out then holds one entry per file")
+            q.add_argument("--columns", default=None,
+                           help="with --input .bin point files: their columns, vod | tj4d | nuscenes or names "
+                                "x,y,z,... (default: the columns of a model that reads a source's own, RadarNeXt)")
             q.add_argument("--out", required=True,
-                           help="detections to write: nuScenes submission JSON (points), COCO results JSON (range-Doppler)")
+                           help="detections to write: nuScenes submission JSON (points), COCO results JSON "
+                                "(range-Doppler, camera); with --input: {model, inputs: [{file, detections}]}")
             q.add_argument("--png-dir", default=None,
-                           help="also write a PNG per frame here: BEV (points), the RD map with its boxes (range-Doppler)")
+                           help="also write a figure per frame here: BEV in metres (points), the RD map over range "
+                                "and velocity (range-Doppler), the image (camera), with a legend and class scores")
             q.add_argument("--png-min-score", type=float, default=None,
-                           help="predicted boxes drawn on the PNGs score at least this (default: points every "
-                                "detection kept; range-Doppler 0.25, ultralytics' predict default)")
+                           help="predicted boxes drawn on the figures score at least this (default 0.25, "
+                                "ultralytics' predict default; the 3 best when none reaches it)")
             q.add_argument("--gt-out", default=None, help="also write the frames' ground truth in the same format")
     add_edge_commands(sub)
     args = p.parse_args(argv)
@@ -239,10 +250,12 @@ def run_train(args) -> int:
 
 
 def run_eval_or_predict(args) -> int:
-    from .cli_report import print_scores
+    from .cli_report import print_found, print_scores
 
     modality, cfg, _ = resolved(args)
     items, detections, predictor, extra = modality.commands.eval_or_predict(args, cfg)
+    if getattr(args, "input", None):  # a user's files have no ground truth: say what was found
+        return print_found(args, modality, items, detections, **extra)
     return print_scores(args, items, detections, predictor, f"{modality.noun}s", **extra)
 
 

@@ -21,3 +21,24 @@ def print_scores(args, items, detections: dict, predictor, noun: str, **extra) -
     else:
         print(f"{args.model} on {args.data}/{args.split} ({len(items)} {noun}): {summary}")
     return 0
+
+
+
+def print_found(args, modality, items, detections: dict, **extra) -> int:
+    """What `dsfec predict --input` found (no ground truth, so no score): files, detections per
+    class, where the JSON and the figures went."""
+    from .modalities.files import detections_document
+
+    weights = str(args.onnx if args.runtime == "onnx" else args.weights or zoo.shipped_weights(args.model))
+    document = detections_document(args.model, modality.files, items, detections)
+    names = [d["class"] for entry in document["inputs"] for d in entry["detections"]]
+    per_class = {c: names.count(c) for c in sorted(set(names))}
+    result = {"model": args.model, "runtime": args.runtime, "weights": weights, "inputs": len(items),
+              "detections": len(names), "per_class": per_class, "out": str(args.out), "png_dir": args.png_dir, **extra}
+    if args.json:
+        print(json.dumps(result, indent=2))
+    else:
+        classes = ", ".join(f"{c} {k}" for c, k in per_class.items()) or "none"
+        print(f"{args.model} on {len(items)} {modality.noun}s of --input: {len(names)} detections ({classes}); "
+              f"wrote {args.out}" + (f" and figures in {args.png_dir}" if args.png_dir else ""))
+    return 0

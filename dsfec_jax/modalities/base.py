@@ -13,6 +13,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
+from .files import FileReader
 
 ALL_CLASSES = "*"  # among a Protocol's match_classes: every class of the predictor
 
@@ -73,7 +74,8 @@ class Modality:
     `name` is what a Family's `modality` field holds ('points', 'rd', 'image'); `noun` what one
     sample is called in messages (frame, sample, image).
     Data: `load_samples(family, source, split, count, seed)` -> samples of a source (the family's
-    benchmark when `source` is its name).
+    benchmark when `source` is its name); `files` reads a user's own files (`dsfec predict --input`,
+    `api.read_files`: modalities/files.py).
     Inference: `predictor(detector, variables, **options)` -> a callable predictor (JAX);
     `ort_predictor(export_dir, **options)` the same over an ONNX export.
     Scoring: `protocols` (metric name -> Protocol): the names a Family's MetricProtocol may hold.
@@ -110,3 +112,4 @@ class Modality:
     train_bench_batches: Callable[..., tuple]
     train_bench_note: Callable[[list, dict], str]
     zoo_table: ZooTable
+    files: FileReader

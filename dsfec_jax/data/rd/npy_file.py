@@ -33,6 +33,14 @@ def _header(path: Path, f) -> tuple[tuple, bool, np.dtype]:
         raise _fail(path, f"not a .npy array ({type(e).__name__}: {str(e)[:160]})") from None
 
 
+def npy_header(path) -> tuple[tuple[int, ...], np.dtype]:
+    """(shape, dtype) a `.npy` file announces, read without its data (ValueError naming the file)."""
+    path = Path(path)
+    with path.open("rb") as f:
+        shape, _, dtype = _header(path, f)
+    return tuple(shape), dtype
+
+
 def read_npy(path, what: str, kinds: str, shape: tuple[int, ...]) -> np.ndarray:
     """The array in `path` (native byte order, C order), which must have dtype kind in `kinds` and
     exactly `shape`; FileNotFoundError if missing, ValueError naming the file and what was expected."""

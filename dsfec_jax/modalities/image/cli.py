@@ -19,8 +19,10 @@ through the Modality record; the shared flags read:
   overrides them. Validation, eval and predict letterbox each image to `--size` (416) on its long side.
 - eval / predict keep detections down to darknet's mAP threshold (0.005) unless --score-threshold
   says otherwise; predict writes COCO JSON (results list, and with --gt-out the ground truth; image
-  pixels) and with --png-dir one PNG per image (ground truth in class colours, predictions scoring
-  >= 0.25 in magenta).
+  pixels) and with --png-dir one figure per image (ground truth solid, predictions scoring >= 0.25
+  dashed with class and score; the best three when none does: modalities/pictures.py).
+  `predict --input PATH...` reads a user's .jpg/.jpeg/.png files instead (modalities/image/files.py;
+  the detections keep the model's class names) and writes one JSON entry per file.
 - `dsfec export` writes the network and the YOLOv3 decode (modalities/image/export.py) at one letterboxed
   size: `--size S` the street frames' rectangle at long side S (default 416: 256 x 416), or
   `--input-hw H,W` any (multiples of 32; a square takes images of every shape, letterboxed as
@@ -43,13 +45,15 @@ from pathlib import Path
 from ... import zoo
 from ...models.camera.decode import EVAL_SCORE
 from ...models.camera.family import FAMILY as CAMERA, class_fields
+from .. import files
 from ..cli_flags import check_export_model, export_weights, onnx_predictor, refuse_point_flags, weights_or_exit
+from ..pictures import planned
+from .files import READER
 from .predict import CameraPredictor
 
 READS = "whole camera images"
 EVAL_SIZE = 416  # eval / predict: the long side images are letterboxed to (the paper's 416)
 TRAIN_FRAMES = 1000  # street frames generated for training without --frames (render rate: docs/camera.md)
-PNG_MIN_SCORE = 0.25  # predictions drawn on a PNG (ultralytics' predict default, as modalities/rd/cli.py's)
 CLASS_FIELDS = CAMERA.weight_fields  # num_classes, class_names: set from the training data
 SYNONYMS = {"synthetic": "street"}  # the commands' default --data is the family's embedded benchmark
 
@@ -68,8 +72,12 @@ def _images(args, split: str, count: int | None):
         sys.exit(f"dsfec {args.command}: {err}")
 
 
-def _source_classes(args) -> tuple[str, ...]:
+def _source_classes(args) -> tuple[str, ...] | None:
+    """The classes of --data; None for --input files (the detections keep the model's names)."""
     from ...data.camera.sources import source_classes
+
+    if getattr(args, "input", None):
+        return None
 
     try:
         return source_classes(data_source(args))
@@ -79,6 +87,7 @@ def _source_classes(args) -> tuple[str, ...]:
 
 def refuse(args, command: str) -> None:
     refuse_point_flags(args, READS)
+    files.refuse_with_input(args)
 
 
 def config_fields(args, overrides: dict) -> dict:
@@ -146,8 +155,9 @@ def _onnx_predictor(args, score_threshold: float):
     def make(export_dir):  # the model is checked before its classes are mapped into --data's
         _, manifest = read_manifest(export_dir, "image")
         check_export_model(args, manifest)
+        data_classes = _source_classes(args)
         return OrtCameraPredictor(export_dir, score_threshold=score_threshold,
-                                  class_map=class_map(manifest["classes"], _source_classes(args)))
+                                  class_map=None if data_classes is None else class_map(manifest["classes"], data_classes))
 
     predictor = onnx_predictor(args, make)  # also exits on no shared class (a ValueError)
     if args.size is not None and args.size != predictor.size:
@@ -161,8 +171,9 @@ def _predictor(args, cfg, score_threshold: float):
     renamed into --data's."""
     from ...data.camera.sources import class_map
 
+    data_classes = _source_classes(args)
     try:
-        mapping = class_map(cfg.classes, _source_classes(args))
+        mapping = None if data_classes is None else class_map(cfg.classes, data_classes)
     except (TypeError, ValueError) as err:
         sys.exit(f"dsfec {args.command}: {err}")
     detector, variables = weights_or_exit(args, cfg)
@@ -179,7 +190,8 @@ def eval_or_predict(args, cfg) -> tuple:
     threshold = EVAL_SCORE if args.score_threshold is None else args.score_threshold
     # a bad --data fails before any network is compiled; a bad --onnx (read, not compiled) before images are made
     onnx = _onnx_predictor(args, threshold) if args.runtime == "onnx" else None
-    images = _images(args, args.split, args.frames)
+    images = files.items_or_exit(args, READER, cfg) if getattr(args, "input", None) else \
+        _images(args, args.split, args.frames)
     predictor = onnx or _predictor(args, cfg, threshold)
     try:  # images are decoded as the loop reaches them
         detections = predictor.predict_samples(images)
@@ -198,20 +210,25 @@ def write_predictions(args, images, detections: dict, predictor) -> None:
     from ...metrics.boxes2d.coco_json import coco_dets_to_list, default_category_ids, default_image_ids
     from ...metrics.boxes2d.voc_coco import voc_gt_to_coco
 
+    if getattr(args, "input", None):  # a user's files: one entry per file (modalities/files.py)
+        files.write_document(args, READER, images, detections, score_threshold=predictor.score_threshold)
+        write_pngs(args, images, detections, predictor)
+        return
     ids = [images[i].image_id for i in range(len(images))]
     image_ids, category_ids = default_image_ids(ids), default_category_ids(predictor.classes)
     atomic.write_json(args.out, coco_dets_to_list(detections, category_ids, image_ids))
     if args.gt_out:
         atomic.write_json(args.gt_out, voc_gt_to_coco(ground_truth(images, predictor.classes)[0], predictor.classes))
-    if args.png_dir:
-        from ...data.camera.preview import save_camera_png
+    write_pngs(args, images, detections, predictor)
 
-        min_score = PNG_MIN_SCORE if args.png_min_score is None else args.png_min_score
-        for i in range(len(images)):
-            item = images[i]
-            found = detections[item.image_id]
-            save_camera_png(item, Path(args.png_dir) / f"{item.image_id.replace('/', '_')}.png",
-                            found.select(found.scores >= min_score))
+
+def write_pngs(args, images, detections: dict, predictor) -> None:
+    """--png-dir: a figure per image (data/camera/figure): ground truth, and the detections scoring
+    >= --png-min-score (default pictures.PNG_MIN_SCORE; when none does, the best few: modalities/pictures)."""
+    from ...data.camera.figure import save_camera_figure
+
+    for item, found, keep, path, title in planned(args, images, detections, READER.ident):
+        save_camera_figure(item, path, found.select(keep), predictor.classes, title)
 
 
 def ship_predictor(cfg, source: Path, info: dict):

@@ -9,6 +9,7 @@ from . import cli
 from .bench import camera_chains
 from .evaluate import PROTOCOLS
 from .export import export_camera
+from .files import READER as FILES
 from .fit import fit_camera
 from .ort import OrtCameraPredictor
 from .predict import CameraPredictor
@@ -27,5 +28,5 @@ MODALITY = Modality(
     latency_stages=latency_stages, size_fields=lambda variables: {},
     # the train bench's camera models take their benchmark's classes, as a training run sets them
     train_bench_fields=lambda name, settings: class_fields(),
-    train_bench_batches=training_batches, train_bench_note=note, zoo_table=ZOO_TABLE,
+    train_bench_batches=training_batches, train_bench_note=note, zoo_table=ZOO_TABLE, files=FILES,
 )

@@ -10,7 +10,9 @@ flags, resolves the config once and hands it here through the Modality record; t
   (range-Doppler, camera) are refused, naming the flag.
 - eval / predict keep detections scoring at least POINT_SCORE_THRESHOLD (core/defaults) unless --score-threshold says
   otherwise; predict writes a nuScenes submission JSON (and with --gt-out the ground truth on the
-  model's grid) and with --png-dir a BEV PNG per frame.
+  model's grid) and with --png-dir a BEV figure per frame (metres, legend, class scores).
+  `predict --input PATH...` reads a user's .pcd / .bin files instead (modalities/points/files.py;
+  `--columns` for a .bin) and writes one JSON entry per file.
 - `dsfec quantize` calibrates on --calib-frames synthetic train frames (seed --seed).
 
 This module never imports cli (the library's one-way door): cli passes what it parsed.
@@ -23,7 +25,10 @@ from pathlib import Path
 
 from ... import zoo
 from ...core.defaults import POINT_SCORE_THRESHOLD, RUN_PILLARS
+from .. import files
 from ..cli_flags import export_weights, onnx_predictor, refuse_camera_flags
+from ..pictures import planned
+from .files import READER
 from .predict import Predictor
 
 TRAIN_WINDOW = 96  # training-window cells without --window (0: the whole grid)
@@ -31,6 +36,7 @@ TRAIN_WINDOW = 96  # training-window cells without --window (0: the whole grid)
 
 def refuse(args, command: str) -> None:
     refuse_camera_flags(args, command, "points")
+    files.refuse_with_input(args)
     if command == "export" and args.input_hw:
         sys.exit(f"dsfec export: --input-hw applies to range-Doppler models; {args.model!r} reads point clouds")
 
@@ -81,37 +87,48 @@ def eval_or_predict(args, cfg) -> tuple:
     from ...data.points.sources import NoFrames
 
     threshold = POINT_SCORE_THRESHOLD if args.score_threshold is None else args.score_threshold
+    if getattr(args, "input", None):  # a user's files: every one read and checked before the model is built
+        frames = files.items_or_exit(args, READER, cfg)
     predictor = _predictor(args, cfg, threshold)
-    try:
-        frames = _frames(args, cfg, args.split, args.frames)
-    except NoFrames as err:
-        sys.exit(f"dsfec {args.command}: {err}")
+    if not getattr(args, "input", None):
+        try:
+            frames = _frames(args, cfg, args.split, args.frames)
+        except NoFrames as err:
+            sys.exit(f"dsfec {args.command}: {err}")
     detections = predictor.predict_samples(frames)
     if args.command == "predict":
         write_predictions(args, frames, detections, predictor)
-    return frames, detections, predictor, {}
+    return frames, detections, predictor, {"score_threshold": threshold}
 
 
 def write_predictions(args, frames, detections: dict, predictor) -> None:
-    """--out: the nuScenes submission; --gt-out: the frames' ground truth on the model's grid (what
-    the metric scores); --png-dir: a BEV PNG per frame."""
+    """--out: the nuScenes submission (--input: one entry per file, modalities/files.py); --gt-out:
+    the frames' ground truth on the model's grid (what the metric scores); --png-dir: a BEV figure
+    per frame."""
     from ...metrics.submission import boxes_to_entries, write_submission
     from .evaluate import in_grid
 
+    if getattr(args, "input", None):
+        files.write_document(args, READER, frames, detections, score_threshold=predictor.score_threshold)
+        write_pngs(args, frames, detections, predictor)
+        return
     results = {token: boxes_to_entries(token, d.boxes, d.scores) for token, d in detections.items()}
     write_submission(args.out, results)
     if args.gt_out:
         grid = predictor.spec.grid  # the boxes the metric scores: those on the model's grid
         gt = {f.frame_id: boxes_to_entries(f.frame_id, in_grid(f.boxes, grid)) for f in (frames[i] for i in range(len(frames)))}
         write_submission(args.gt_out, gt, is_gt=True)
-    if args.png_dir:
-        from ...data.points.synthetic.bev_png import save_bev_png
-        for i in range(len(frames)):
-            f = frames[i]
-            safe = f.frame_id.replace("/", "_") or f"frame_{i:06d}"
-            found = detections[f.frame_id]
-            shown = found.boxes if args.png_min_score is None else found.boxes[found.scores >= args.png_min_score]
-            save_bev_png(f, Path(args.png_dir) / f"{safe}.png", predictor.spec.grid, predicted=shown)
+    write_pngs(args, frames, detections, predictor)
+
+
+def write_pngs(args, frames, detections: dict, predictor) -> None:
+    """--png-dir: a BEV figure per frame (data/points/bev_figure), its detections at least
+    --png-min-score (default pictures.PNG_MIN_SCORE, or the best few when none reaches it)."""
+    from ...data.points.bev_figure import save_bev_figure
+
+    for frame, found, keep, path, title in planned(args, frames, detections, READER.ident):
+        save_bev_figure(frame, path, predictor.spec.grid, found.boxes.select(keep), found.scores[keep],
+                        predictor.class_names, title)
 
 
 def ship_predictor(cfg, source: Path, info: dict):

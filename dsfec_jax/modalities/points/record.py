@@ -9,6 +9,7 @@ from . import cli
 from .bench import point_chains
 from .evaluate import PROTOCOLS
 from .export import export
+from .files import READER as FILES
 from .fit import fit
 from .ort import OrtPredictor
 from .predict import predictor_for
@@ -31,5 +32,5 @@ MODALITY = Modality(
                       quantize=cli.quantize),
     export=export, quantize=quantize, bench_chains=point_chains, stage_name=stage_of,
     latency_stages=latency_stages, size_fields=lambda variables: {}, train_bench_fields=fields,
-    train_bench_batches=training_batches, train_bench_note=note, zoo_table=ZOO_TABLE,
+    train_bench_batches=training_batches, train_bench_note=note, zoo_table=ZOO_TABLE, files=FILES,
 )

@@ -11,7 +11,9 @@ mean the same for every family, with these readings for RD models:
   source: its whole split).
 - eval / predict keep detections down to the paper's evaluation confidence (decode.EVAL_CONF,
   0.001) unless --score-threshold says otherwise; predict writes COCO JSON (results list and
-  ground truth, map-pixel boxes) and one PNG per sample with its ground truth and predictions.
+  ground truth, map-pixel boxes) and with --png-dir one figure per sample with its ground truth and
+  predictions. `predict --input PATH...` reads a user's .npy maps and raw TI ADC captures instead
+  (modalities/rd/files.py) and writes one JSON entry per file.
 - the point-cloud flags (--window, --window-sampling, --max-pillars, export's --top-k) and the
   camera ones (--size, --sizes) do not apply to whole RD maps: given explicitly they are refused,
   naming the flag, rather than ignored.
@@ -26,22 +28,22 @@ from pathlib import Path
 
 from ... import zoo
 from ...models.yolo_rd.decode import EVAL_CONF
+from .. import files
 from ..cli_flags import export_weights, onnx_predictor, refuse_camera_flags, refuse_point_flags, weights_or_exit
+from ..pictures import planned
+from .files import READER
 from .predict import RDPredictor
 
 # yolo_quick (train/schedules.py) is "15 epochs over ~1000 synthetic 256x64 samples": 62 batches of
 # 16 an epoch, the 14,880 training frames its CPU timing assumes
 TRAIN_SAMPLES = 1000
-# predicted boxes drawn on a PNG: ultralytics' predict confidence (ultralytics/ultralytics:
-# ultralytics/engine/predictor.py, BasePredictor sets conf 0.25 when none is given); at the
-# evaluation confidence (0.001) a map would carry up to 300 boxes, mostly noise
-PNG_MIN_SCORE = 0.25
 READS = "whole range-Doppler maps"
 
 
 def refuse(args, command: str) -> None:
     refuse_camera_flags(args, command, "rd")
     refuse_point_flags(args, READS)
+    files.refuse_with_input(args)
 
 
 def config_fields(args, overrides: dict) -> dict:
@@ -93,7 +95,9 @@ def eval_or_predict(args, cfg) -> tuple:
     """`dsfec eval` / `dsfec predict` of an RD model -> (samples, detections, predictor, extra
     report fields); the protocol: COCO mAP@50, @50-95, @30 and DAROD mAP@50."""
     threshold = EVAL_CONF if args.score_threshold is None else args.score_threshold
-    samples = _samples(args, args.split, args.frames)  # a bad --data fails before any network is built
+    # a bad --data or --input file fails before any network is built
+    samples = files.items_or_exit(args, READER, cfg) if getattr(args, "input", None) else \
+        _samples(args, args.split, args.frames)
     predictor = _predictor(args, cfg, threshold)
     detections = predictor.predict_samples(samples)
     if args.command == "predict":
@@ -109,6 +113,10 @@ def write_predictions(args, samples, detections: dict, predictor) -> None:
     from .evaluate import ground_truth
     from ...metrics.boxes2d.coco_json import coco_dets_to_list, coco_gt_to_dict, default_category_ids, default_image_ids
 
+    if getattr(args, "input", None):  # a user's files: one entry per file (modalities/files.py)
+        files.write_document(args, READER, samples, detections, score_threshold=predictor.score_threshold)
+        write_pngs(args, samples, detections, predictor)
+        return
     image_ids = default_image_ids([s.sample_id for s in samples])
     category_ids = default_category_ids(predictor.classes)
     try:
@@ -120,22 +128,18 @@ def write_predictions(args, samples, detections: dict, predictor) -> None:
     atomic.write_json(args.out, results)
     if gt is not None:
         atomic.write_json(args.gt_out, gt)
-    if args.png_dir:
-        write_pngs(Path(args.png_dir), samples, detections, predictor,
-                   PNG_MIN_SCORE if args.png_min_score is None else args.png_min_score)
+    write_pngs(args, samples, detections, predictor)
 
 
-def write_pngs(out_dir: Path, samples, detections: dict, predictor, min_score: float) -> None:
-    """<sample id>.png: heatmap and grayscale panels, ground truth in class colours, predictions
-    scoring >= min_score in magenta (data/rd/preview)."""
-    from ...data.rd.preview import save_rd_png
+def write_pngs(args, samples, detections: dict, predictor) -> None:
+    """--png-dir: a figure per sample (data/rd/figure: range in m, velocity in m/s, colorbar, ground
+    truth and the detections scoring >= --png-min-score (default pictures.PNG_MIN_SCORE))."""
+    from ...data.rd.figure import save_rd_figure
 
     representation = getattr(predictor, "representation", None)
     colormap = representation.colormap if representation is not None else "viridis"
-    for i, s in enumerate(samples):
-        found = detections[s.sample_id]
-        name = s.sample_id.replace("/", "_") or f"sample_{i:06d}"
-        save_rd_png(s, out_dir / f"{name}.png", colormap, predicted=found.select(found.scores >= min_score))
+    for sample, found, keep, path, title in planned(args, samples, detections, READER.ident):
+        save_rd_figure(sample, path, found.select(keep), predictor.classes, colormap, title)
 
 
 def _representation(info: dict):

@@ -9,6 +9,7 @@ from . import cli
 from .bench import rd_chains
 from .evaluate import PROTOCOLS
 from .export import export_rd
+from .files import READER as FILES
 from .fit import fit_rd
 from .ort import OrtRDPredictor
 from .predict import RDPredictor
@@ -25,5 +26,5 @@ MODALITY = Modality(
                       quantize=cli.quantize),
     export=export_rd, quantize=quantize_rd, bench_chains=rd_chains, stage_name=part_of,
     latency_stages=latency_stages, size_fields=size_fields, train_bench_fields=lambda name, settings: {},
-    train_bench_batches=training_batches, train_bench_note=note, zoo_table=ZOO_TABLE,
+    train_bench_batches=training_batches, train_bench_note=note, zoo_table=ZOO_TABLE, files=FILES,
 )

@@ -57,8 +57,8 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
     assert rows and min(r["score"] for r in rows) >= 0.005
     names = {c["id"]: c["name"] for c in json.loads(gt.read_text())["categories"]}
     assert [names[k] for k in sorted(names)] == voc["classes_scored"]
-    image = np.asarray(Image.open(png / "2007_000027.png"))
-    assert image.shape == (500, 486, 3)  # the original image, boxes drawn on it
+    width, height = Image.open(png / "2007_000027.png").size
+    assert (width, height) == (700, 707)  # a figure of the 486 x 500 image, scaled to a 6-inch width
 
     shipped = tmp_path / "weights"
     assert cli.main(["ship", "--model", "shuffle_yolov3", "--run-dir", str(run), "--frames", "2",

@@ -12,7 +12,6 @@ from PIL import Image
 from dsfec_jax import api, cli, zoo
 from dsfec_jax.modalities.rd import cli as cli_rd
 from dsfec_jax.boxes.boxes2d import Boxes2D
-from dsfec_jax.data.rd.preview import PREDICTION, render_rd
 from dsfec_jax.data.rd.sources import load_rd_samples
 from dsfec_jax.modalities.rd.evaluate import score_rd
 from dsfec_jax.metrics.boxes2d.coco_json import load_coco_dets, load_coco_gt
@@ -58,11 +57,8 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
     offline = score_rd(truth.boxes, load_coco_dets(pred, truth), truth.classes)
     for key in RD_KEYS | {"AP50", "num_gt"}:  # the files carry everything the metric needs
         assert offline[key] == in_process[key], key
-    dets = dict(zip([s.sample_id for s in samples], load_coco_dets(pred, truth).values()))
-    for s in samples:  # each PNG is the sample with its ground truth and the predictions >= 0.25
-        image = np.asarray(Image.open(png / f"{s.sample_id}.png").convert("RGB"))
-        shown = dets[s.sample_id].select(dets[s.sample_id].scores >= cli_rd.PNG_MIN_SCORE)
-        np.testing.assert_array_equal(image, render_rd(s, predicted=shown))
+    for s in samples:  # one figure per sample (what it draws: test_pngs_draw_only_predictions_above_the_min_score)
+        assert Image.open(png / f"{s.sample_id}.png").size == (700, 750)
 
     shipped = tmp_path / "weights"
     assert cli.main(["ship", "--model", "yolov8n", "--run-dir", str(run), "--frames", "2",
@@ -79,19 +75,24 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
     assert type(api.load("yolov8n", weights=shipped / "yolov8n.msgpack")).__name__ == "RDPredictor"
 
 
-def test_pngs_draw_only_predictions_above_the_min_score(tmp_path):
+def test_pngs_draw_only_predictions_above_the_min_score(tmp_path, monkeypatch):
+    from argparse import Namespace
+
+    from dsfec_jax.data.rd import figure
+
     sample = load_rd_samples("synthetic", "val", 1)[0]
     found = Boxes2D(np.array([[2, 10, 12, 40], [30, 100, 50, 140]], np.float32), np.array(["car", "person"]),
                     np.array([0.6, 0.1], np.float32))
+    drawn = []
+    monkeypatch.setattr(figure, "save_rd_figure", lambda s, path, predicted, *rest: drawn.append(predicted))
 
     class Fake:
-        representation = None
+        representation, classes = None, ("person", "car")
 
-    cli_rd.write_pngs(tmp_path, [sample], {sample.sample_id: found}, Fake(), min_score=0.25)
-    image = np.asarray(Image.open(tmp_path / f"{sample.sample_id}.png").convert("RGB"))
-    np.testing.assert_array_equal(image, render_rd(sample, predicted=found.select(np.array([True, False]))))
-    assert (image == PREDICTION).all(-1).any()  # the 0.6 box is drawn
-    assert not np.array_equal(image, render_rd(sample, predicted=found))  # the 0.1 one is not
+    for given, scores in ((None, [0.6]), (0.05, [0.6, 0.1])):  # default 0.25; --png-min-score 0.05
+        cli_rd.write_pngs(Namespace(png_dir=str(tmp_path), png_min_score=given, model="yolov8n"), [sample],
+                          {sample.sample_id: found}, Fake())
+        assert drawn.pop().scores.tolist() == pytest.approx(scores)
 
 
 class Recorder:
