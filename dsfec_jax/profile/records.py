@@ -12,6 +12,7 @@ import jax
 
 from .. import zoo
 from . import counting, latency, memory
+from ..core import machine_load
 from ..core.environment import environment
 
 
@@ -62,17 +63,23 @@ def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int
             variables = latency.timing_variables(d)
             stages = None if light else m.latency_stages
             suites[d.name] = latency.stage_functions(d, variables, d.dummy_inputs(1), stages)
-        times = latency.time_interleaved(suites, repeats, warmup)
+        with machine_load.watch() as load:  # was the machine busy while the loop ran?
+            times = latency.time_interleaved(suites, repeats, warmup)
+        machine_load.warn(load.verdict, "the latency timing")
         for rec, d in zip(records, detectors):
             t = times[rec["model"]]
             rec["latency_ms"] = round(t["total"]["median_ms"], 3)
+            rec["latency_p10_ms"] = round(t["total"]["p10_ms"], 3)
             rec["latency_p90_ms"] = round(t["total"]["p90_ms"], 3)
             rec["latency_per_stage_ms"] = {s: round(v["median_ms"], 3) for s, v in t.items() if s != "total"}
+            rec["latency_per_stage_p10_p90_ms"] = {s: [round(v["p10_ms"], 3), round(v["p90_ms"], 3)]
+                                                   for s, v in t.items() if s != "total"}
+            rec["machine_load"] = load.verdict
             rec["latency_setup"] = {"batch": 1, "repeats": repeats, "warmup": warmup, "interleaved": True,
                                     "depthwise_impl": getattr(d.config, "depthwise_impl", None), **env}
     else:
         for rec in records:
-            rec["latency_ms"] = None
+            rec["latency_ms"] = rec["latency_p10_ms"] = rec["latency_p90_ms"] = rec["machine_load"] = None
     return records
 
 
