@@ -91,12 +91,17 @@ def _value(record: dict, key: str):
     return v / 1e6 if key == "params" and v is not None else v
 
 
+SIZE_KEYS = ("gflops", "params", "memory_mb")  # counted from the architecture: the same for every seed
+
+
 def _cell(row, base, key, digits) -> str:
     v = row[key]
     if v is None:
         return "failed" if row["failed"] else "-"
     if key == "latency_ms":  # the spread over the timing loop's repeats, not over seeds
         text = spread.text(v, row.get("latency_ms_p10"), row.get("latency_ms_p90"), digits)
+    elif key in SIZE_KEYS:  # a property of the architecture: seeds cannot spread it
+        text = f"{v:.{digits}f}"
     else:
         text = f"{v:.{digits}f}" + (f" ± {row[key + '_sd']:.{digits}f}" if row["seeds"] > 1 else "")
     if base is not None and row is not base and base[key] is not None:
