@@ -97,10 +97,10 @@ def plot(records: list[dict], path: Path) -> None:
     ax.errorbar(labels, bottom, yerr=[np.maximum(totals - low, 0), np.maximum(high - totals, 0)], fmt="none",
                 ecolor="black", capsize=3, lw=1, label="total p10-p90")
     ax.set_ylabel("ms, batch 1 (median; whisker p10-p90)")
-    if any((r.get("machine") or {}).get("busy") for r in records):
-        ax.text(0.01, 0.98, "machine busy while timing: figures not the machine's", transform=ax.transAxes,
-                fontsize=7, color="tab:red", va="top")
-    ax.set_title("raw input -> boxes, per stage")
+    busy = any((r.get("machine") or {}).get("busy") for r in records)
+    # in the title, where no bar or whisker can run into it
+    ax.set_title("raw input -> boxes, per stage" + ("\nthe machine was busy while timing: not the machine's figures"
+                                                    if busy else ""), fontsize=10)
     ax.legend(fontsize=7)
     ax.tick_params(axis="x", labelsize=6)
     fig.tight_layout()

@@ -16,6 +16,7 @@ from ...core import progress
 
 RUNTIMES = ("jax", "onnx", "onnx-int8")
 JAX_BATCHES = (1, 2, 4, 8)
+NO_HEARTBEAT_S = 3600.0
 
 
 def cached_export(workdir: Path, tag: str, export, quantize, int8: bool) -> Path:
@@ -39,8 +40,9 @@ def jax_throughput(det, variables, fn, repeats: int, hw: tuple[int, int] | None 
     percentile time, at the 10th]}: the spread over the repeats). `hw`: the input size of the
     models whose dummy inputs take one (camera images: the bench's letterboxed size)."""
     fps, spread = {}, {}
+    # start and end lines only: the worker's enclosing "preparing <model>" stage already beats
     with progress.stage(f"measuring {det.name}'s JAX throughput at batch {', '.join(map(str, JAX_BATCHES))} "
-                        "(each batch size compiles once)"):
+                        "(each batch size compiles once)", heartbeat_s=NO_HEARTBEAT_S):
         for b in JAX_BATCHES:
             x = det.dummy_inputs(b, occupancy=0.25) if hw is None else det.config.dummy_inputs(b, hw=tuple(hw))
             jax.block_until_ready(fn(variables, x))
