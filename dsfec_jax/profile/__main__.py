@@ -110,7 +110,7 @@ def main(argv=None) -> int:
     if unknown:
         sys.exit(f"unknown model(s) {unknown}; available: {zoo.available()}")
     recs = records.profile(records.detectors_for(names), not args.no_latency, args.repeats, args.warmup,
-                           modality_of=modality_of)
+                           modality_of=modality_of, announce=True)
     print(json.dumps(recs, indent=2) if args.json else human(recs))
     if args.paper:
         dsfec = modality_of(compare.TABLE2_BASE)  # DSFEC's Tables 2-3: shown beside any model of its modality

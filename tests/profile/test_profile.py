@@ -119,7 +119,10 @@ def test_cli_json_and_readme(tmp_path, capsys):
     out = tmp_path / "zoo.json"
     assert profile_main(["--models", "dsfec_s", "--json", "--repeats", "2", "--warmup", "1",
                          "--out", str(out), "--readme", str(readme)]) == 0
-    records = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    records = json.loads(captured.out)
+    assert "counting the sizes of 1 model (XLA compiles each): done in" in captured.err  # never silent
+    assert "timing 1 model: 1 warm-up (compiles) and 2 timed repeats, interleaved: done in" in captured.err
     assert {"model", "params", "gflops", "memory_mb", "latency_ms"} <= set(records[0])
     assert records[0]["model"] == "dsfec_s" and records[0]["params"] == 296_942
     text = readme.read_text()
