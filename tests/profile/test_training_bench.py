@@ -66,6 +66,7 @@ def test_the_record_holds_every_figure(record):
         assert config["pillar_slots"] == config["input"]["points"][1] == SETTINGS.max_pillars
     env = record["environment"]
     assert env["cpu"] and env["versions"]["jax"] and env["xla_threads"] >= 1
+    assert env["machine"]["text"].startswith(("busy: ", "idle: "))  # the machine while the steps were timed
 
 
 def test_compare_gives_two_configs_and_ratios(record):
@@ -93,6 +94,9 @@ def test_markdown_and_readme(record, tmp_path):
     assert "| dsfec_s | default |" in table and "notes=same network" in table and "Op time per step" in table
     spread = record["configs"][0]["fwd_bwd_over_eval_by_repetition"]
     assert f"| {record['configs'][0]['fwd_bwd_over_eval']:.2f} ({spread['p10']:.2f}-{spread['p90']:.2f}) |" in table
+    busy = {**record, "environment": {**record["environment"], "machine": {"busy": True, "text": "busy: load 3.9 on 2 CPUs"}}}
+    assert "Timed on a busy machine: dsfec_s (None threads): load 3.9 on 2 CPUs." in \
+        training.markdown(training.payload("c", [busy], SETTINGS, COMPARE), modality_of=modality_of)
     readme = tmp_path / "README.md"
     readme.write_text(f"intro\n{training.README_START}\nold\n{training.README_END}\nend\n")
     training.update_readme(readme, content, modality_of=modality_of)

@@ -11,17 +11,16 @@ every (model, runtime) chain is timed in one interleaved loop (timing.py).
 
 from __future__ import annotations
 
-import codecs
 import json
 import logging
 import os
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 from typing import Callable
 
 from ...core import machine_load, progress, spread
+from ...core.child_process import run_passing_stderr
 from ...core import threads as thread_control
 from .timing import time_chains
 
@@ -75,25 +74,11 @@ def run(models: list[str], runtimes: list[str], threads: list[int], repeats: int
                    "--runtimes", ",".join(runtimes), "--threads", str(t), "--repeats", str(repeats),
                    "--warmup", str(warmup), "--records-out", str(out)]
             env = {**os.environ, "OMP_NUM_THREADS": str(t)}
-            code, tail = run_passing_stderr(cmd, env)
+            code, tail = run_passing_stderr(cmd, env)  # the worker's progress reaches the user
             if code != 0:
                 raise RuntimeError(f"bench worker (threads={t}) failed:\n{tail}")
             records += json.loads(out.read_text())
     return records
-
-
-def run_passing_stderr(cmd: list[str], env: dict, keep: int = 3000) -> tuple[int, str]:
-    """Run `cmd`, its stderr (the worker's progress: exporting, compiling, timing) passed on to
-    ours as it comes, so `dsfec bench` is never silent -> (exit code, the last `keep` characters of
-    that stderr, for the error message). Raw chunks, not lines: tqdm redraws its bar with \\r."""
-    decoder, tail = codecs.getincrementaldecoder("utf-8")(errors="replace"), ""
-    with subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) as proc:
-        while chunk := proc.stderr.read1(4096):
-            text = decoder.decode(chunk)
-            sys.stderr.write(text)
-            sys.stderr.flush()
-            tail = (tail + text)[-keep:]
-    return proc.returncode, tail
 
 
 def main(chains_of: Callable[[str], Callable[..., dict]], argv=None) -> int:
