@@ -48,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import zoo
-from ..core import atomic, host_memory, machine_load
+from ..core import atomic, host_memory, machine_load, progress
 from ..core.child_process import run_passing_stderr
 from ..core import threads as thread_control
 from ..core.defaults import RUN_PILLARS
@@ -330,9 +330,13 @@ def measure(name: str, settings: Settings, compare: dict | None = None, threads:
 
     base = dict(base or {})
     configs = [("default", base)] + ([("compare", {**base, **compare})] if compare else [])
-    workloads = [build_workload(name, label, overrides, settings, modality) for label, overrides in configs]
+    workloads = []
+    for label, overrides in configs:
+        with progress.stage(f"compiling {name}'s {len(PROGRAMS)} programs ({label} config)"):
+            workloads.append(build_workload(name, label, overrides, settings, modality))
     references = sgemms()
-    with machine_load.watch() as load:  # was the machine busy while the steps were timed?
+    with machine_load.watch() as load, progress.stage(  # was the machine busy while the steps were timed?
+            f"timing {name}: {settings.warmup} warm-up and {settings.repeats} repetitions, interleaved"):
         samples = time_interleaved(workloads, references, settings)
     machine_load.warn(load.verdict, f"the train bench's timing of {name}")
     alone = time_alone(references, settings)
@@ -341,7 +345,8 @@ def measure(name: str, settings: Settings, compare: dict | None = None, threads:
     results = [figures(w, samples[w.label], peak, settings.batch) for w in workloads]
     if settings.breakdown:
         for w, r in zip(workloads, results):
-            r["breakdown"] = step_breakdown(w, settings, xla_threads())
+            with progress.stage(f"profiling where {name}'s step time goes ({w.label} config, XLA profiler)"):
+                r["breakdown"] = step_breakdown(w, settings, xla_threads())
     return {
         "model": name, "family": zoo.family_of(name).name, "threads": threads, "windows": workloads[0].windows,
         "settings": dataclasses.asdict(settings),
@@ -443,7 +448,7 @@ def run(models: list[str], threads: list[int], settings: Settings, compare: dict
                        "--threads", str(t), "--settings", json.dumps(dataclasses.asdict(settings)), "--out", str(out)]
                 if compare:
                     cmd += ["--compare", json.dumps(_jsonable(compare))]
-                # the worker's progress (compiling the step, timing) reaches the user as it comes
+                # the worker's progress (compiling its programs, timing) reaches the user as it comes
                 code, tail = run_passing_stderr(cmd, {**os.environ, "OMP_NUM_THREADS": str(t)})
                 if code != 0:
                     raise RuntimeError(f"train bench worker ({name}, {t} threads) failed:\n{tail}")
