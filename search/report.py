@@ -16,7 +16,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from dsfec_jax import zoo
-from dsfec_jax.core import atomic
+from dsfec_jax.core import atomic, spread
 
 from . import seed_agreement, significance
 from .journal import Journal
@@ -55,12 +55,33 @@ def rows(records: list[dict], columns: tuple | None = None) -> list[dict]:
         row = {"label": label, "seeds": len(recs), "failed": len(recs) - len(ok),
                "errors": [r["error"] for r in recs if r["status"] != "ok"]}
         for key, _, _ in columns:
+            if key == "latency_ms":
+                row.update(latency_spread(ok))
+                continue
             vals = [_value(r, key) for r in ok]
             vals = [v for v in vals if v is not None]
             row[key] = statistics.fmean(vals) if vals else None
             row[key + "_sd"] = statistics.stdev(vals) if len(vals) > 1 else 0.0
         out.append(row)
     return out
+
+
+def latency_spread(ok: list[dict]) -> dict:
+    """A candidate's latency: the median of its measured medians, with the spread over the timing
+    loop's repeats (the lowest 10th and highest 90th percentile of its measurements) and the
+    machine's verdict while it was timed. Not a spread over seeds: `--seeds N` profiles a
+    candidate once and the other seeds copy its costs ("costs_from"), so a standard deviation over
+    seeds is 0 whatever the noise (issue 51's latency column)."""
+    own = [r["costs"] for r in ok if "costs_from" not in r and r.get("costs", {}).get("latency_ms") is not None]
+    if not own:
+        return {"latency_ms": None, "latency_ms_sd": None, "latency_ms_p10": None, "latency_ms_p90": None,
+                "latency_busy": None}
+    p10 = [c["latency_p10_ms"] for c in own if c.get("latency_p10_ms") is not None]
+    p90 = [c["latency_p90_ms"] for c in own if c.get("latency_p90_ms") is not None]
+    busy = [c["machine_load"]["text"] for c in own if (c.get("machine_load") or {}).get("busy")]
+    return {"latency_ms": statistics.median(c["latency_ms"] for c in own), "latency_ms_sd": None,
+            "latency_ms_p10": min(p10) if p10 else None, "latency_ms_p90": max(p90) if p90 else None,
+            "latency_busy": busy[0] if busy else None}
 
 
 def _value(record: dict, key: str):
@@ -70,11 +91,19 @@ def _value(record: dict, key: str):
     return v / 1e6 if key == "params" and v is not None else v
 
 
+SIZE_KEYS = ("gflops", "params", "memory_mb")  # counted from the architecture: the same for every seed
+
+
 def _cell(row, base, key, digits) -> str:
     v = row[key]
     if v is None:
         return "failed" if row["failed"] else "-"
-    text = f"{v:.{digits}f}" + (f" ± {row[key + '_sd']:.{digits}f}" if row["seeds"] > 1 else "")
+    if key == "latency_ms":  # the spread over the timing loop's repeats, not over seeds
+        text = spread.text(v, row.get("latency_ms_p10"), row.get("latency_ms_p90"), digits)
+    elif key in SIZE_KEYS:  # a property of the architecture: seeds cannot spread it
+        text = f"{v:.{digits}f}"
+    else:
+        text = f"{v:.{digits}f}" + (f" ± {row[key + '_sd']:.{digits}f}" if row["seeds"] > 1 else "")
     if base is not None and row is not base and base[key] is not None:
         text += f" ({v - base[key]:+.{digits}f})"
     return text
@@ -103,6 +132,12 @@ def markdown(table: list[dict], base_label: str | None, title: str, columns: tup
     for r in table:
         for err in r["errors"]:
             lines.append(f"\nFailed: {r['label']}: {err}")
+    if any(k == "latency_ms" for k, _, _ in columns):
+        lines.append("\nLatency: median over the timing loop's repeats, (p10-p90) beside it.")
+        busy = [r for r in table if r.get("latency_busy")]
+        if busy:
+            lines.append(f"Timed on a busy machine ({busy[0]['latency_busy']}): the latencies of "
+                         f"{', '.join(r['label'] for r in busy)} are not the machine's; their order is noise.")
     if sig is not None:
         lines.append("\n" + significance.summary(sig))
     return "\n".join(lines) + "\n"
@@ -158,7 +193,8 @@ def provenance(records: list[dict], meta: dict) -> str:
 
 def csv_text(table: list[dict], columns: tuple) -> str:
     buf = io.StringIO()
-    keys = ["label", "seeds", "failed"] + [k for key, _, _ in columns for k in (key, key + "_sd")]
+    keys = ["label", "seeds", "failed"] + [k for key, _, _ in columns for k in
+                                            ((key, key + "_p10", key + "_p90") if key == "latency_ms" else (key, key + "_sd"))]
     writer = csv.DictWriter(buf, keys, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(table)
@@ -171,27 +207,78 @@ def pareto(points: list[tuple[float, float]]) -> list[int]:
             if not any((c2 <= c and s2 >= s) and (c2 < c or s2 > s) for c2, s2 in points)]
 
 
-def plot(table: list[dict], cost: str, path: Path, title: str, score: tuple[str, str] = ("car_mAP", "Car mAP")) -> None:
+COST_TITLES = {"gflops": "GFLOPs (2 x MAC, batch 1)", "latency_ms": "latency (ms, batch 1, CPU; median, whisker p10-p90)"}
+
+
+def score_errors(table: list[dict], key: str, sig: dict | None) -> tuple[list, str | None]:
+    """Per-row (below, above) error of the plotted score and what it is: the bootstrap 95 %
+    interval of the headline (search.significance: 'ci95'), else +- the seeds' standard deviation,
+    else none."""
+    ci = (sig or {}).get("ci95", {})
+    if sig and sig.get("statistic") and all(r["label"] in ci for r in table):
+        return ([(max(r[key] - ci[r["label"]][0], 0.0), max(ci[r["label"]][1] - r[key], 0.0)) for r in table],
+                "bootstrap 95 % interval")
+    if any(r["seeds"] > 1 for r in table):
+        return [(r.get(key + "_sd") or 0.0,) * 2 for r in table], "+- seeds' standard deviation"
+    return [(0.0, 0.0)] * len(table), None
+
+
+def plot(table: list[dict], cost: str, path: Path, title: str, score: tuple[str, str] = ("car_mAP", "Car mAP"),
+         sig: dict | None = None) -> None:
+    """`figure` written to `path` as a PNG."""
+    save_figure(figure(table, cost, title, score, sig), path)
+
+
+def figure(table: list[dict], cost: str, title: str, score: tuple[str, str] = ("car_mAP", "Car mAP"),
+           sig: dict | None = None):
+    """mAP against a cost, each candidate with its error bars (the score's interval; the latency's
+    p10-p90), labelled clear of each other; the Pareto front in red, its line drawn only through two
+    or more points (one point is no front); a warning on the plot when the latency was timed on a
+    busy machine."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from . import plot_labels
+
     key, name = score
-    pts = [(r[cost], r[key], r["label"]) for r in table if r[cost] is not None and r[key] is not None]
-    fig, ax = plt.subplots(figsize=(6, 4.2), dpi=120)
-    if pts:
-        front = set(pareto([(c, s) for c, s, _ in pts]))
-        for i, (c, s, label) in enumerate(pts):
-            ax.scatter(c, s, color="tab:red" if i in front else "tab:blue", zorder=3)
-            ax.annotate(label, (c, s), fontsize=7, xytext=(3, 3), textcoords="offset points")
-        fr = sorted((pts[i][0], pts[i][1]) for i in front)
-        ax.plot([c for c, _ in fr], [s for _, s in fr], color="tab:red", lw=1, label="Pareto front")
-        ax.legend(fontsize=8)
-    ax.set_xlabel({"gflops": "GFLOPs (2 x MAC, batch 1)", "latency_ms": "latency (ms, batch 1, CPU)"}[cost])
+    rows_ = [r for r in table if r[cost] is not None and r[key] is not None]
+    fig, ax = plt.subplots(figsize=(6.4, 4.6), dpi=120)
+    if rows_:
+        pts = [(r[cost], r[key]) for r in rows_]
+        front = set(pareto(pts))
+        yerr, yerr_kind = score_errors(rows_, key, sig)
+        xerr = ([(r[cost] - (r.get("latency_ms_p10") or r[cost]), (r.get("latency_ms_p90") or r[cost]) - r[cost])
+                 for r in rows_] if cost == "latency_ms" else None)
+        for on_front, colour, label in ((False, "tab:blue", "candidate"), (True, "tab:red", "on the Pareto front")):
+            idx = [i for i in range(len(rows_)) if (i in front) == on_front]
+            if not idx:
+                continue
+            ax.errorbar([pts[i][0] for i in idx], [pts[i][1] for i in idx],
+                        yerr=[[yerr[i][0] for i in idx], [yerr[i][1] for i in idx]] if yerr_kind else None,
+                        xerr=[[xerr[i][0] for i in idx], [xerr[i][1] for i in idx]] if xerr else None,
+                        fmt="o", color=colour, ecolor=colour, elinewidth=0.8, capsize=2, ms=5, zorder=3, label=label)
+        if len(front) >= 2:
+            fr = sorted(pts[i] for i in front)
+            ax.plot([c for c, _ in fr], [s for _, s in fr], color="tab:red", lw=1, zorder=2, label="Pareto front")
+        notes = [f"error bars: {yerr_kind}"] if yerr_kind else []
+        if cost == "latency_ms" and any(r.get("latency_busy") for r in rows_):
+            notes.append("timed on a busy machine: latency order is noise")
+        if notes:
+            ax.set_title(title + "\n" + "; ".join(notes), fontsize=8)
+        else:
+            ax.set_title(title, fontsize=9)
+        ax.margins(x=0.15, y=0.15)  # room for the labels beside the outermost points
+        ax.legend(fontsize=7, loc="best")
+    else:
+        ax.set_title(title, fontsize=9)
+    ax.set_xlabel(COST_TITLES[cost])
     ax.set_ylabel(f"{name} (%)")
-    ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)
-    save_figure(fig, path)
+    fig.tight_layout()
+    if rows_:
+        plot_labels.place(ax, [(c, s, r["label"]) for (c, s), r in zip(pts, rows_)])
+    return fig
 
 
 def save_figure(fig, path: Path) -> None:
@@ -245,8 +332,10 @@ def write_reports(run_dir: str | Path) -> dict:
         files.append("seed_agreement.json")
     else:
         (run_dir / "seed_agreement.json").unlink(missing_ok=True)
-    plot(table, "gflops", run_dir / "map_vs_gflops.png", title, score)
-    plot(table, "latency_ms", run_dir / "map_vs_latency.png", title, score)
+    # the plots' error bars are the headline's bootstrap intervals: only when the bootstrap scores it
+    plotted_sig = sig if sig is not None and sig.get("statistic") == score[1] else None
+    plot(table, "gflops", run_dir / "map_vs_gflops.png", title, score, plotted_sig)
+    plot(table, "latency_ms", run_dir / "map_vs_latency.png", title, score, plotted_sig)
     return {"rows": table, "files": files, "significance": sig, "seed_agreement": seeds}
 
 

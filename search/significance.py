@@ -120,6 +120,8 @@ def paired_bootstrap(records: list[dict], base_label: str | None, resamples: int
            "resamples": resamples, "seed": seed,
            "point": dict(zip(labels, point.round(4).tolist())),
            "sd": dict(zip(labels, boot.std(0, ddof=1).round(4).tolist())),
+           # each candidate's own 95 % interval (the plots' error bars; the table's are differences)
+           "ci95": {label: np.percentile(boot[:, i], [2.5, 97.5]).round(4).tolist() for i, label in enumerate(labels)},
            "best": labels[int(point.argmax())],
            "p_best_stays_best": round(float(np.mean(boot.argmax(1) == point.argmax())), 4),
            "rank_tau_mean": round(float(taus.mean()), 4) if len(taus) else None,

@@ -21,6 +21,9 @@ from .recipes import get_recipe
 TRIAL_FIELDS = ("base", "label", "overrides", "recipe", "data", "seed", "strategy", "init", "supernet_steps",
                 "key")  # what make_trial writes; a record adds the measurements
 COST_COLUMNS = ("params", "gflops", "memory_mb", "latency_ms", "latency_p90_ms")  # what a record keeps of a profile
+# ...and, where the profile has them, the latency's spread over the repeats and the machine's verdict
+# while it was timed (core/machine_load.py); journals from before them lack both
+TIMING_COLUMNS = ("latency_p10_ms", "machine_load")
 
 
 def trial_key(spec: dict) -> str:
@@ -108,7 +111,8 @@ def measured(scores: dict, tables: dict, costs: dict) -> dict:
     """The measured part of a trial record, whichever strategy (train, oneshot) produced it:
     metrics (per-class groups flattened), the profile's cost columns (and, when an earlier
     seed's profile was reused, the key it came from), and the match tables for intervals."""
-    out = {"metrics": flat_metrics(scores), "costs": {k: costs[k] for k in COST_COLUMNS}}
+    out = {"metrics": flat_metrics(scores), "costs": {k: costs[k] for k in COST_COLUMNS}
+           | {k: costs[k] for k in TIMING_COLUMNS if k in costs}}
     if "from" in costs:
         out["costs_from"] = costs["from"]
     if tables:

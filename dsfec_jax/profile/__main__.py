@@ -54,6 +54,8 @@ def set_threads(threads: int | None) -> None:
 
 
 def human(records: list[dict]) -> str:
+    from ..core import spread
+
     lines = []
     for r in records:
         lat = r.get("latency_ms")
@@ -62,11 +64,17 @@ def human(records: list[dict]) -> str:
         lines.append(
             f"{r['model']:<15} params {r['params']:>10,d}{folded}  GFLOPs {r['gflops']:7.3f} (XLA {r['xla_gflops']:7.3f}, "
             f"{100 * r['xla_vs_analytic']:+.1f} %)  memory {mem} MB (XLA peak {r['xla_peak_mb']:.1f} MB)  "
-            + (f"latency {lat:.2f} ms (p90 {r['latency_p90_ms']:.2f})" if lat else "latency -")
+            + (f"latency {spread.text(lat, r.get('latency_p10_ms'), r['latency_p90_ms'], 2)} ms (median, p10-p90)"
+               if lat else "latency -")
         )
         lines.append("           GFLOPs/stage " + ", ".join(f"{k} {v:.3f}" for k, v in r["gflops_per_stage"].items()))
         if lat:
-            lines.append("           ms/stage " + ", ".join(f"{k} {v:.2f}" for k, v in r["latency_per_stage_ms"].items()))
+            band = r.get("latency_per_stage_p10_p90_ms", {})
+            lines.append("           ms/stage " + ", ".join(f"{k} {spread.text(v, *band.get(k, (None, None)), 2)}"
+                                                          for k, v in r["latency_per_stage_ms"].items()))
+    busy = next((r["machine_load"] for r in records if (r.get("machine_load") or {}).get("busy")), None)
+    if busy:  # one timing loop for all models: one verdict
+        lines.append(f"warning: timed on a busy machine ({busy['text'][len('busy: '):]}): not the machine's latency")
     return "\n".join(lines)
 
 
@@ -102,7 +110,7 @@ def main(argv=None) -> int:
     if unknown:
         sys.exit(f"unknown model(s) {unknown}; available: {zoo.available()}")
     recs = records.profile(records.detectors_for(names), not args.no_latency, args.repeats, args.warmup,
-                           modality_of=modality_of)
+                           modality_of=modality_of, announce=True)
     print(json.dumps(recs, indent=2) if args.json else human(recs))
     if args.paper:
         dsfec = modality_of(compare.TABLE2_BASE)  # DSFEC's Tables 2-3: shown beside any model of its modality

@@ -12,6 +12,7 @@ import jax
 
 from .. import zoo
 from . import counting, latency, memory
+from ..core import machine_load, progress
 from ..core.environment import environment
 
 
@@ -49,12 +50,16 @@ def size_record(detector, modality, xla: bool = True) -> dict:
 
 
 def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int = 3, light: bool = False, *,
-            modality_of: Callable[[Any], Any]) -> list[dict]:
+            modality_of: Callable[[Any], Any], announce: bool = False) -> list[dict]:
     """Records for `detectors`; latencies come from one interleaved loop over all of them.
     `modality_of(config)` -> the config's Modality record (modalities.registry.modality_of).
-    light=True: no XLA columns and only the whole network timed (one compile per model, not five)."""
+    light=True: no XLA columns and only the whole network timed (one compile per model, not five).
+    announce=True: say on stderr what it is doing (the profiler's command; a search's trials have
+    their own progress)."""
     modalities = [modality_of(d.config) for d in detectors]
-    records = [size_record(d, m, xla=not light) for d, m in zip(detectors, modalities)]
+    with progress.stage(f"counting the sizes of {len(detectors)} model{'s' * (len(detectors) > 1)}"
+                        + ("" if light else " (XLA compiles each)"), enabled=announce):
+        records = [size_record(d, m, xla=not light) for d, m in zip(detectors, modalities)]
     env = environment()
     if timing:
         suites = {}
@@ -62,17 +67,25 @@ def profile(detectors: list, timing: bool = True, repeats: int = 20, warmup: int
             variables = latency.timing_variables(d)
             stages = None if light else m.latency_stages
             suites[d.name] = latency.stage_functions(d, variables, d.dummy_inputs(1), stages)
-        times = latency.time_interleaved(suites, repeats, warmup)
+        with machine_load.watch() as load, progress.stage(
+                f"timing {len(detectors)} model{'s' * (len(detectors) > 1)}: {warmup} warm-up (compiles) and "
+                f"{repeats} timed repeats, interleaved", enabled=announce):
+            times = latency.time_interleaved(suites, repeats, warmup)
+        machine_load.warn(load.verdict, "the latency timing")
         for rec, d in zip(records, detectors):
             t = times[rec["model"]]
             rec["latency_ms"] = round(t["total"]["median_ms"], 3)
+            rec["latency_p10_ms"] = round(t["total"]["p10_ms"], 3)
             rec["latency_p90_ms"] = round(t["total"]["p90_ms"], 3)
             rec["latency_per_stage_ms"] = {s: round(v["median_ms"], 3) for s, v in t.items() if s != "total"}
+            rec["latency_per_stage_p10_p90_ms"] = {s: [round(v["p10_ms"], 3), round(v["p90_ms"], 3)]
+                                                   for s, v in t.items() if s != "total"}
+            rec["machine_load"] = load.verdict
             rec["latency_setup"] = {"batch": 1, "repeats": repeats, "warmup": warmup, "interleaved": True,
                                     "depthwise_impl": getattr(d.config, "depthwise_impl", None), **env}
     else:
         for rec in records:
-            rec["latency_ms"] = None
+            rec["latency_ms"] = rec["latency_p10_ms"] = rec["latency_p90_ms"] = rec["machine_load"] = None
     return records
 
 

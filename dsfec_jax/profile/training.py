@@ -37,7 +37,6 @@ import json
 import os
 import re
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
@@ -49,7 +48,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import zoo
-from ..core import atomic, host_memory
+from ..core import atomic, host_memory, machine_load, progress
+from ..core.child_process import run_passing_stderr
 from ..core import threads as thread_control
 from ..core.defaults import RUN_PILLARS
 from . import counting, op_breakdown
@@ -330,16 +330,23 @@ def measure(name: str, settings: Settings, compare: dict | None = None, threads:
 
     base = dict(base or {})
     configs = [("default", base)] + ([("compare", {**base, **compare})] if compare else [])
-    workloads = [build_workload(name, label, overrides, settings, modality) for label, overrides in configs]
+    workloads = []
+    for label, overrides in configs:
+        with progress.stage(f"compiling {name}'s {len(PROGRAMS)} programs ({label} config)"):
+            workloads.append(build_workload(name, label, overrides, settings, modality))
     references = sgemms()
-    samples = time_interleaved(workloads, references, settings)
+    with machine_load.watch() as load, progress.stage(  # was the machine busy while the steps were timed?
+            f"timing {name}: {settings.warmup} warm-up and {settings.repeats} repetitions, interleaved"):
+        samples = time_interleaved(workloads, references, settings)
+    machine_load.warn(load.verdict, f"the train bench's timing of {name}")
     alone = time_alone(references, settings)
     rates, interleaved = sgemm_rates(alone), sgemm_rates(samples["sgemm"])
     peak = max(rates.values())
     results = [figures(w, samples[w.label], peak, settings.batch) for w in workloads]
     if settings.breakdown:
         for w, r in zip(workloads, results):
-            r["breakdown"] = step_breakdown(w, settings, xla_threads())
+            with progress.stage(f"profiling where {name}'s step time goes ({w.label} config, XLA profiler)"):
+                r["breakdown"] = step_breakdown(w, settings, xla_threads())
     return {
         "model": name, "family": zoo.family_of(name).name, "threads": threads, "windows": workloads[0].windows,
         "settings": dataclasses.asdict(settings),
@@ -350,7 +357,7 @@ def measure(name: str, settings: Settings, compare: dict | None = None, threads:
         "configs": results, "comparison": comparison(results) if compare else None,
         "environment": {"cpu": cpu_model(), "threads_asked": threads, "xla_threads": xla_threads(),
                         "cpu_affinity": thread_control.available_cpus(), "glibc_hugetlb": host_memory.active(),
-                        "keeps_xla_buffers": host_memory.keeps_buffers(),
+                        "keeps_xla_buffers": host_memory.keeps_buffers(), "machine": load.verdict,
                         "versions": versions(("jax", "jaxlib", "flax", "numpy", "optax", "dsfec_jax"))},
     }
 
@@ -441,9 +448,10 @@ def run(models: list[str], threads: list[int], settings: Settings, compare: dict
                        "--threads", str(t), "--settings", json.dumps(dataclasses.asdict(settings)), "--out", str(out)]
                 if compare:
                     cmd += ["--compare", json.dumps(_jsonable(compare))]
-                proc = subprocess.run(cmd, env={**os.environ, "OMP_NUM_THREADS": str(t)}, capture_output=True, text=True)
-                if proc.returncode != 0:
-                    raise RuntimeError(f"train bench worker ({name}, {t} threads) failed:\n{proc.stderr[-3000:]}")
+                # the worker's progress (compiling its programs, timing) reaches the user as it comes
+                code, tail = run_passing_stderr(cmd, {**os.environ, "OMP_NUM_THREADS": str(t)})
+                if code != 0:
+                    raise RuntimeError(f"train bench worker ({name}, {t} threads) failed:\n{tail}")
                 records.append(json.loads(out.read_text()))
     return records
 
@@ -522,6 +530,11 @@ def markdown(content: dict, breakdown_rows: int = 6, full: bool = True, record: 
                   f"call(s) of itself (steady state). Analytic GFLOP/s count {content['flops_convention']}. Peak: "
                   f"{content['peak_convention']}. Record: `{_record_text(record)}`."
                   + _notes(records, s, modality_of)]
+    busy = [r for r in records if (r["environment"].get("machine") or {}).get("busy")]
+    if busy:  # the figures above are then not the machine's: say so where they are read
+        lines += ["", "Timed on a busy machine: " + "; ".join(
+            f"{r['model']} ({r['threads']} threads): {r['environment']['machine']['text'][len('busy: '):]}"
+            for r in busy) + ". These figures are not the machine's."]
     for r in records:
         for c in r["configs"]:
             if c.get("breakdown"):

@@ -51,6 +51,9 @@ def table_markdown(payload: dict, table) -> str:
     lines.append(f"Measured with `{payload['command']}` on {env.get('cpu', '?')}, {_threads(env)}, "
                  f"jax {env.get('versions', {}).get('jax', '?')}; records in "
                  f"`dsfec_jax/profile/records/{table.record.name}`. " + table.note)
+    busy = next((r["machine_load"] for r in recs if (r.get("machine_load") or {}).get("busy")), None)
+    if busy:  # a table must not pass a loaded machine's latencies off as the machine's
+        lines.append(f"\nLatency measured on a busy machine ({busy['text'][len('busy: '):]}): not the machine's.")
     return "\n".join(lines)
 
 

@@ -42,30 +42,42 @@ def reference_table(references: list[dict], metric: str) -> str:
 
 def plot_pareto(records: list[dict], cost: str, metric: str, path: Path, title: str,
                 references: list[dict] = ()) -> None:
-    """Every scored subnet (blue), its Pareto front (red) and reference models (black squares:
-    {'label', cost, metric})."""
+    """`pareto_figure` written to `path` as a PNG."""
+    save_figure(pareto_figure(records, cost, metric, title, references), path)
+
+
+def pareto_figure(records: list[dict], cost: str, metric: str, title: str, references: list[dict] = ()):
+    """Every scored subnet (blue), its Pareto front (red; a line only through two or more points)
+    and reference models (black squares: {'label', cost, metric}), their labels kept inside the
+    axes and clear of each other (search/plot_labels.py)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .. import plot_labels
+
     scale = 1e-6 if cost == "params" else 1.0
     pts = [(r["costs"][cost] * scale, r[metric]) for r in records]
-    fig, ax = plt.subplots(figsize=(6, 4.2), dpi=120)
+    fig, ax = plt.subplots(figsize=(6.4, 4.6), dpi=120)
     if pts:
         ax.scatter([c for c, _ in pts], [s for _, s in pts], s=10, color="tab:blue", alpha=0.5, label="subnets (inherited weights)")
         front = sorted(pts[i] for i in pareto(pts))
-        ax.plot([c for c, _ in front], [s for _, s in front], color="tab:red", marker="o", ms=3, lw=1, label="Pareto front")
-    for ref in references:
-        if ref.get(metric) is None or ref.get(cost) is None:
-            continue
-        ax.scatter(ref[cost] * scale, ref[metric], marker="s", color="black", zorder=4)
-        ax.annotate(ref["label"], (ref[cost] * scale, ref[metric]), fontsize=7, xytext=(3, 3), textcoords="offset points")
+        ax.plot([c for c, _ in front], [s for _, s in front], color="tab:red", marker="o", ms=3,
+                lw=1 if len(front) > 1 else 0, label="Pareto front" if len(front) > 1 else "best subnet (no front)")
+    refs = [(ref[cost] * scale, ref[metric], ref["label"]) for ref in references
+            if ref.get(metric) is not None and ref.get(cost) is not None]
+    if refs:
+        ax.scatter([c for c, _, _ in refs], [s for _, s, _ in refs], marker="s", color="black", zorder=4,
+                   label="hand-designed models")
     ax.set_xlabel(COST_LABELS[cost])
     ax.set_ylabel(f"{metric} (%)")
     ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)
+    ax.margins(x=0.12, y=0.12)  # room for the labels beside the outermost points
     ax.legend(fontsize=7)
-    save_figure(fig, path)
+    fig.tight_layout()
+    plot_labels.place(ax, refs)
+    return fig
 
 
 def write_report(run_dir: Path, header: str, progress: str, records: list[dict], metric: str,

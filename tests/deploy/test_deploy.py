@@ -241,13 +241,19 @@ def test_bench_times_every_stage_per_runtime_and_writes_reports(tmp_path, capsys
 
     assert main(["bench", "--models", "dsfec_s", "--runtimes", "jax,onnx", "--repeats", "2", "--warmup", "1",
                  "--out", str(tmp_path), "--json"]) == 0
-    records = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    records = json.loads(captured.out)
+    # the worker's progress reaches the user's stderr as it runs (it was captured and dropped: 2.5 min of silence)
+    for said in ("preparing dsfec_s for jax, onnx", "measuring dsfec_s's JAX throughput", "warming up 2 chains x 1",
+                 "timing 2 chains, interleaved"):
+        assert said in captured.err, captured.err[-2000:]
     assert [(r["model"], r["runtime"], r["threads"]) for r in records] == [("dsfec_s", "jax", 1), ("dsfec_s", "onnx", 1)]
     for r in records:
         assert set(r["stages_ms"]) == {"pillarize", "network", "decode", "nms"}
         assert r["total_ms"] >= r["stages_ms"]["network"] > 0 and r["cpu"] and r["versions"]["onnxruntime"]
-    assert set(records[0]["throughput_fps"]) == {"1", "2", "4", "8"}
+    assert set(records[0]["throughput_fps"]) == set(records[0]["throughput_fps_p10_p90"]) == {"1", "2", "4", "8"}
     assert "JAX / ONNX Runtime (dsfec_s, 1 thread)" in (tmp_path / "bench.md").read_text()
+    assert records[0]["machine"]["text"].startswith(("busy: ", "idle: "))
     assert (tmp_path / "bench.png").read_bytes()[:4] == b"\x89PNG"
     assert json.loads((tmp_path / "bench.json").read_text())["command"].startswith("dsfec bench")
     with pytest.raises(SystemExit, match="unknown"):
@@ -299,8 +305,10 @@ def test_the_bench_worker_times_the_chains_its_caller_hands_it():
     point passes each model's Modality.bench_chains) and records their stages and fields."""
     import time
 
-    from dsfec_jax.deploy.bench import workers
+    from dsfec_jax.deploy.bench import report, workers
     from dsfec_jax.deploy.bench.__main__ import chains_of
+
+    BUSY = {"busy": True, "text": "busy: load 3.9 on 2 CPUs"}
     from dsfec_jax.modalities.registry import modality_of
 
     asked = []
@@ -315,3 +323,12 @@ def test_the_bench_worker_times_the_chains_its_caller_hands_it():
     assert [(r["model"], r["runtime"]) for r in records] == [("a", "jax"), ("a", "onnx"), ("b", "jax"), ("b", "onnx")]
     assert all(set(r["stages_ms"]) == {"make", "sum"} and r["weights"] == "none" for r in records)
     assert chains_of("yolov8n") is modality_of("yolov8n").bench_chains  # the entry point's lookup
+    # every figure with its spread over the repeats, and the machine's verdict while they ran
+    for r in records:
+        assert r["total_p10_ms"] <= r["total_ms"] <= r["total_p90_ms"] and r["total_p10_ms"] >= 1.0
+        low, high = r["stages_p10_p90_ms"]["make"]
+        assert low <= r["stages_ms"]["make"] <= high and isinstance(r["machine"]["busy"], bool)
+    r = records[0]
+    table = report.markdown([{**r, "cpu": "test", "versions": {}, "machine": BUSY}])
+    assert "total ms (p10-p90)" in table and f"{r['total_ms']:.1f} ({r['total_p10_ms']:.1f}-{r['total_p90_ms']:.1f})" in table
+    assert "Warning: the machine was busy while the 1-thread worker timed (load 3.9 on 2 CPUs)" in table

@@ -8,7 +8,7 @@ from dsfec_jax import zoo
 from dsfec_jax.profile import compare, count_gflops, count_params, counting, layer_macs
 from dsfec_jax.models.dsfec import paper
 from dsfec_jax.profile.counting import compile_network, xla_gflops
-from dsfec_jax.profile.__main__ import main as profile_main
+from dsfec_jax.profile.__main__ import human, main as profile_main
 from dsfec_jax.profile.memory import paper_memory_mb
 from dsfec_jax.modalities.registry import modality_of
 from dsfec_jax.profile.records import profile, size_record
@@ -85,8 +85,12 @@ def test_published_zoo_records_keep_xla_within_2_percent():
 def test_latency_records_per_stage():
     recs = profile([tiny("dsfec_s")], timing=True, repeats=3, warmup=1, modality_of=modality_of)
     rec = recs[0]
-    assert rec["latency_ms"] > 0 and rec["latency_p90_ms"] >= rec["latency_ms"]
-    assert set(rec["latency_per_stage_ms"]) == {"pillar_net", "backbone", "neck_heads"}
+    assert 0 < rec["latency_p10_ms"] <= rec["latency_ms"] <= rec["latency_p90_ms"]
+    assert set(rec["latency_per_stage_ms"]) == set(rec["latency_per_stage_p10_p90_ms"]) == {"pillar_net", "backbone", "neck_heads"}
+    assert rec["machine_load"]["text"].startswith(("busy: ", "idle: "))
+    text = human([{**rec, "machine_load": {"busy": True, "text": "busy: load 3.9 on 2 CPUs"}}])
+    assert f"latency {rec['latency_ms']:.2f} ({rec['latency_p10_ms']:.2f}-{rec['latency_p90_ms']:.2f}) ms" in text
+    assert "warning: timed on a busy machine (load 3.9 on 2 CPUs)" in text
     assert rec["latency_setup"]["threads"] >= 1 and rec["latency_setup"]["versions"]["jax"]
 
 
@@ -115,7 +119,10 @@ def test_cli_json_and_readme(tmp_path, capsys):
     out = tmp_path / "zoo.json"
     assert profile_main(["--models", "dsfec_s", "--json", "--repeats", "2", "--warmup", "1",
                          "--out", str(out), "--readme", str(readme)]) == 0
-    records = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    records = json.loads(captured.out)
+    assert "counting the sizes of 1 model (XLA compiles each): done in" in captured.err  # never silent
+    assert "timing 1 model: 1 warm-up (compiles) and 2 timed repeats, interleaved: done in" in captured.err
     assert {"model", "params", "gflops", "memory_mb", "latency_ms"} <= set(records[0])
     assert records[0]["model"] == "dsfec_s" and records[0]["params"] == 296_942
     text = readme.read_text()

@@ -2,7 +2,9 @@
 comparison gives two configs and ratios, the op breakdown finds a known op's module, and bad
 input is refused naming the field. Figures are printed, never asserted against a time."""
 
+import contextlib
 import dataclasses
+import io
 import math
 
 import flax.linen as nn
@@ -27,8 +29,27 @@ COMPARE = {"notes": "same network"}
 
 
 @pytest.fixture(scope="module")
-def record():
-    return training.measure("dsfec_s", SETTINGS, COMPARE, base=TINY, modality=modality_of("dsfec_s"))
+def measured():
+    """(the record, what the measurement said on stderr)."""
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        record = training.measure("dsfec_s", SETTINGS, COMPARE, base=TINY, modality=modality_of("dsfec_s"))
+    return record, err.getvalue()
+
+
+@pytest.fixture(scope="module")
+def record(measured):
+    return measured[0]
+
+
+def test_the_measurement_says_what_it_does(measured):
+    """Never silent: compiling each config's programs, timing, the breakdown (issue 51)."""
+    err = measured[1]
+    for said in ("compiling dsfec_s's 4 programs (default config): done in",
+                 "compiling dsfec_s's 4 programs (compare config): done in",
+                 "timing dsfec_s: 0 warm-up and 1 repetitions, interleaved: done in",
+                 "profiling where dsfec_s's step time goes (default config, XLA profiler): done in"):
+        assert said in err, err
 
 
 def positive(value) -> bool:
@@ -66,6 +87,7 @@ def test_the_record_holds_every_figure(record):
         assert config["pillar_slots"] == config["input"]["points"][1] == SETTINGS.max_pillars
     env = record["environment"]
     assert env["cpu"] and env["versions"]["jax"] and env["xla_threads"] >= 1
+    assert env["machine"]["text"].startswith(("busy: ", "idle: "))  # the machine while the steps were timed
 
 
 def test_compare_gives_two_configs_and_ratios(record):
@@ -93,6 +115,9 @@ def test_markdown_and_readme(record, tmp_path):
     assert "| dsfec_s | default |" in table and "notes=same network" in table and "Op time per step" in table
     spread = record["configs"][0]["fwd_bwd_over_eval_by_repetition"]
     assert f"| {record['configs'][0]['fwd_bwd_over_eval']:.2f} ({spread['p10']:.2f}-{spread['p90']:.2f}) |" in table
+    busy = {**record, "environment": {**record["environment"], "machine": {"busy": True, "text": "busy: load 3.9 on 2 CPUs"}}}
+    assert "Timed on a busy machine: dsfec_s (None threads): load 3.9 on 2 CPUs." in \
+        training.markdown(training.payload("c", [busy], SETTINGS, COMPARE), modality_of=modality_of)
     readme = tmp_path / "README.md"
     readme.write_text(f"intro\n{training.README_START}\nold\n{training.README_END}\nend\n")
     training.update_readme(readme, content, modality_of=modality_of)

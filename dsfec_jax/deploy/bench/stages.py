@@ -12,8 +12,11 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from ...core import progress
+
 RUNTIMES = ("jax", "onnx", "onnx-int8")
 JAX_BATCHES = (1, 2, 4, 8)
+NO_HEARTBEAT_S = 3600.0
 
 
 def cached_export(workdir: Path, tag: str, export, quantize, int8: bool) -> Path:
@@ -32,16 +35,23 @@ def cached_export(workdir: Path, tag: str, export, quantize, int8: bool) -> Path
 
 def jax_throughput(det, variables, fn, repeats: int, hw: tuple[int, int] | None = None) -> dict:
     """Frames/s of the jitted fn(variables, inputs) (network + decode; + NMS for an RD model, whose
-    predictor compiles it) at each batch size (batch 1 .. 8) -> {batch: fps}. `hw`: the input size of
-    the models whose dummy inputs take one (camera images: the bench's letterboxed size)."""
-    out = {}
-    for b in JAX_BATCHES:
-        x = det.dummy_inputs(b, occupancy=0.25) if hw is None else det.config.dummy_inputs(b, hw=tuple(hw))
-        jax.block_until_ready(fn(variables, x))
-        times = []
-        for _ in range(max(3, repeats // b)):
-            t0 = time.perf_counter()
+    predictor compiles it) at each batch size (batch 1 .. 8) -> the record fields 'throughput_fps'
+    ({batch: fps at the median time}) and 'throughput_fps_p10_p90' ({batch: [fps at the 90th
+    percentile time, at the 10th]}: the spread over the repeats). `hw`: the input size of the
+    models whose dummy inputs take one (camera images: the bench's letterboxed size)."""
+    fps, spread = {}, {}
+    # start and end lines only: the worker's enclosing "preparing <model>" stage already beats
+    with progress.stage(f"measuring {det.name}'s JAX throughput at batch {', '.join(map(str, JAX_BATCHES))} "
+                        "(each batch size compiles once)", heartbeat_s=NO_HEARTBEAT_S):
+        for b in JAX_BATCHES:
+            x = det.dummy_inputs(b, occupancy=0.25) if hw is None else det.config.dummy_inputs(b, hw=tuple(hw))
             jax.block_until_ready(fn(variables, x))
-            times.append(time.perf_counter() - t0)
-        out[str(b)] = round(b / float(np.median(times)), 2)
-    return out
+            times = []
+            for _ in range(max(3, repeats // b)):
+                t0 = time.perf_counter()
+                jax.block_until_ready(fn(variables, x))
+                times.append(time.perf_counter() - t0)
+            p10, med, p90 = np.percentile(times, [10, 50, 90])
+            fps[str(b)] = round(b / float(med), 2)
+            spread[str(b)] = [round(b / float(p90), 2), round(b / float(p10), 2)]
+    return {"throughput_fps": fps, "throughput_fps_p10_p90": spread}

@@ -10,11 +10,17 @@ machine hits them all alike and their ratios hold.
 
 from __future__ import annotations
 
+import sys
 import time
+
+from tqdm import tqdm
+
+from ...core import progress
 
 
 def time_chains(chains: dict, repeats: int, warmup: int) -> dict:
-    """Interleaved timing: key -> stage -> list of ms (plus 'total')."""
+    """Interleaved timing: key -> stage -> list of ms (plus 'total'). Says on stderr what it does:
+    the warm-up (the first call of a jitted chain compiles it) and a bar over the repeats."""
     def run(steps, sink=None):
         x, total = None, 0.0
         for stage, fn in steps:
@@ -27,11 +33,14 @@ def time_chains(chains: dict, repeats: int, warmup: int) -> dict:
         if sink is not None:
             sink["total"].append(total)
 
-    for steps in chains.values():
-        for _ in range(warmup):
-            run(steps)
+    with progress.stage(f"warming up {len(chains)} chain{'s' * (len(chains) > 1)} x {warmup} "
+                        "(the first call compiles)", enabled=warmup > 0):
+        for steps in chains.values():
+            for _ in range(warmup):
+                run(steps)
     samples = {k: {s: [] for s, _ in steps} | {"total": []} for k, steps in chains.items()}
-    for _ in range(repeats):
+    for _ in tqdm(range(repeats), desc=f"timing {len(chains)} chains, interleaved", unit="repeat",
+                  disable=progress.quiet(), file=sys.stderr):
         for key, steps in chains.items():
             run(steps, samples[key])
     return samples

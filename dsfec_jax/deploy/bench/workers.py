@@ -12,15 +12,15 @@ every (model, runtime) chain is timed in one interleaved loop (timing.py).
 from __future__ import annotations
 
 import json
+import logging
 import os
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 from typing import Callable
 
-import numpy as np
-
+from ...core import machine_load, progress, spread
+from ...core.child_process import run_passing_stderr
 from ...core import threads as thread_control
 from .timing import time_chains
 
@@ -35,21 +35,29 @@ def worker(models: list[str], runtimes: list[str], threads: int, repeats: int, w
     chains, extra = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in models:
-            for rt, (steps, fields) in chains_of(name)(name, runtimes, threads, Path(tmp), repeats).items():
+            with progress.stage(f"preparing {name} for {', '.join(runtimes)} (weights, ONNX export, INT8 "
+                                "calibration, JAX throughput)"):
+                built = chains_of(name)(name, runtimes, threads, Path(tmp), repeats)
+            for rt, (steps, fields) in built.items():
                 chains[(name, rt)], extra[(name, rt)] = steps, fields
-        samples = time_chains(chains, repeats, warmup)
+        with machine_load.watch() as load:  # the machine around the timed loop: busy or not
+            samples = time_chains(chains, repeats, warmup)
+    machine_load.warn(load.verdict, f"the bench's timing ({threads} thread{'s' * (threads > 1)})")
     # threads: the count asked for; xla_threads: XLA's pool as observed after the runs (the truth)
     env = {"cpu": cpu_model(), "threads": threads, "xla_threads": xla_threads(),
            "cpu_affinity": thread_control.available_cpus(), "versions": versions(
         ("jax", "jaxlib", "flax", "numpy", "onnxruntime", "jax2onnx", "dsfec_jax"))}
     records = []
     for (name, rt), s in samples.items():
-        med = {k: round(float(np.median(v)), 3) for k, v in s.items()}
+        stats = {k: spread.percentiles(v) for k, v in s.items()}
+        stages = [k for k in s if k != "total"]
         records.append({"model": name, "runtime": rt, "threads": threads,
-                        "stages_ms": {k: med[k] for k in s if k != "total"}, "total_ms": med["total"],
-                        "total_p90_ms": round(float(np.percentile(s["total"], 90)), 3),
-                        "fps_batch1": round(1e3 / med["total"], 2), "repeats": repeats, "warmup": warmup,
-                        **extra[(name, rt)], **env})
+                        "stages_ms": {k: stats[k]["median"] for k in stages},
+                        "stages_p10_p90_ms": {k: [stats[k]["p10"], stats[k]["p90"]] for k in stages},
+                        "total_ms": stats["total"]["median"], "total_p10_ms": stats["total"]["p10"],
+                        "total_p90_ms": stats["total"]["p90"],
+                        "fps_batch1": round(1e3 / stats["total"]["median"], 2), "repeats": repeats, "warmup": warmup,
+                        "machine": load.verdict, **extra[(name, rt)], **env})
     return records
 
 
@@ -66,9 +74,9 @@ def run(models: list[str], runtimes: list[str], threads: list[int], repeats: int
                    "--runtimes", ",".join(runtimes), "--threads", str(t), "--repeats", str(repeats),
                    "--warmup", str(warmup), "--records-out", str(out)]
             env = {**os.environ, "OMP_NUM_THREADS": str(t)}
-            proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
-            if proc.returncode != 0:
-                raise RuntimeError(f"bench worker (threads={t}) failed:\n{proc.stderr[-3000:]}")
+            code, tail = run_passing_stderr(cmd, env)  # the worker's progress reaches the user
+            if code != 0:
+                raise RuntimeError(f"bench worker (threads={t}) failed:\n{tail}")
             records += json.loads(out.read_text())
     return records
 
@@ -85,6 +93,10 @@ def main(chains_of: Callable[[str], Callable[..., dict]], argv=None) -> int:
     p.add_argument("--warmup", type=int, default=3)
     p.add_argument("--records-out", required=True)
     a = p.parse_args(argv)
+    # the worker's stderr now reaches the user: keep it to progress and errors. onnx_ir warns once per
+    # graph value whose type the exporter leaves unset (the decode graph's top-k outputs); the graphs
+    # run and agree with JAX (tests/deploy), so the dozen lines per model say nothing to act on
+    logging.getLogger("onnx_ir").setLevel(logging.ERROR)
     thread_control.pin(a.threads)  # before the first jax computation: XLA sizes its pool from it
     records = worker(a.models.split(","), a.runtimes.split(","), a.threads, a.repeats, a.warmup, chains_of)
     Path(a.records_out).write_text(json.dumps(records))

@@ -122,6 +122,6 @@ def camera_chains(name: str, runtimes: list[str], threads: int, workdir: Path, r
         out[rt] = (camera_chain(image, pipeline), {"weights": label, "input_hw": list(input_hw)})
     if "jax" in out:
         network = decoding_network(det)
-        out["jax"][1]["throughput_fps"] = jax_throughput(det, variables, jax.jit(lambda v, x: network(v, x["image"])),
-                                                         repeats, hw=input_hw)
+        out["jax"][1].update(jax_throughput(det, variables, jax.jit(lambda v, x: network(v, x["image"])),
+                                            repeats, hw=input_hw))
     return out

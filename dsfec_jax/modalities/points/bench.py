@@ -121,5 +121,5 @@ def point_chains(name: str, runtimes: list[str], threads: int, workdir: Path, re
             stages = ort_stages(onnx_graphs(det, variables, predictor, workdir, rt == "onnx-int8", calib), threads)
         out[rt] = (chain(points, spec, stages, predictor), {"weights": label, "points": int(len(points))})
     if "jax" in out:
-        out["jax"][1]["throughput_fps"] = jax_throughput(det, variables, jax.jit(decoded_network(det, 100)), repeats)
+        out["jax"][1].update(jax_throughput(det, variables, jax.jit(decoded_network(det, 100)), repeats))
     return out

@@ -114,5 +114,5 @@ def rd_chains(name: str, runtimes: list[str], threads: int, workdir: Path, repea
         out[rt] = (rd_chain(sample, representation, det.config.input_names, stages),
                    {"weights": label, "input_hw": list(input_hw)})
     if "jax" in out:
-        out["jax"][1]["throughput_fps"] = jax_throughput(det, variables, jax.jit(detecting_network(det)), repeats)
+        out["jax"][1].update(jax_throughput(det, variables, jax.jit(detecting_network(det)), repeats))
     return out
