@@ -34,3 +34,27 @@ def test_quiet_silences_every_stage(monkeypatch):
     with progress.stage("compiling", heartbeat_s=0.01, stream=out):
         time.sleep(0.05)
     assert out.getvalue() == ""
+
+
+def test_a_bar_runs_its_first_item_inside_a_stage_and_draws_on_stderr(capsys):
+    seen = []
+    for item in progress.bar(range(3), "detecting", first="compiling the predictor", unit="batch"):
+        seen.append(item)
+        if item == 0:
+            time.sleep(0.05)  # the first item's work happens while the stage is open
+    err = capsys.readouterr().err
+    assert seen == [0, 1, 2] and "detecting" in err and "3/3" in err
+    assert err.count("compiling the predictor...") == 1
+    assert re.search(r"compiling the predictor: done in 0\.\d s", err)
+    assert capsys.readouterr().out == ""
+
+
+def test_a_stage_line_lifts_a_running_bar_onto_a_line_of_its_own(capsys):
+    from tqdm import tqdm
+
+    with tqdm(total=2, desc="training") as bar:
+        bar.update(1)
+        with progress.stage("compiling"):
+            pass
+    lines = capsys.readouterr().err.replace("\r", "\n").splitlines()
+    assert "compiling..." in lines  # not glued to the end of the bar's line

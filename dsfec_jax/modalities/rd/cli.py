@@ -95,7 +95,7 @@ def eval_or_predict(args, cfg) -> tuple:
     threshold = EVAL_CONF if args.score_threshold is None else args.score_threshold
     samples = _samples(args, args.split, args.frames)  # a bad --data fails before any network is built
     predictor = _predictor(args, cfg, threshold)
-    detections = predictor.predict_samples(samples)
+    detections = predictor.predict_samples(samples, progress=True)
     if args.command == "predict":
         write_predictions(args, samples, detections, predictor)
     return samples, detections, predictor, {"score_threshold": threshold}
