@@ -58,3 +58,12 @@ def test_a_stage_line_lifts_a_running_bar_onto_a_line_of_its_own(capsys):
             pass
     lines = capsys.readouterr().err.replace("\r", "\n").splitlines()
     assert "compiling..." in lines  # not glued to the end of the bar's line
+
+
+def test_a_generation_bar_shows_only_once_the_generation_is_slow(capsys, monkeypatch):
+    monkeypatch.setattr(progress, "GENERATION_DELAY_S", 0.05)  # the 2 s of a real generation, scaled down
+    assert list(progress.generating(range(2), "generating quick maps")) == [0, 1]  # done before the delay
+    assert "generating quick maps" not in capsys.readouterr().err
+    for _ in progress.generating(range(4), "generating slow maps"):
+        time.sleep(0.04)
+    assert "generating slow maps" in capsys.readouterr().err
