@@ -24,8 +24,9 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+from tqdm import tqdm
 
-from dsfec_jax.core import checkpoint
+from dsfec_jax.core import checkpoint, progress
 from dsfec_jax import zoo
 from dsfec_jax.core.environment import environment
 from dsfec_jax.core.provenance import jsonable
@@ -37,6 +38,7 @@ from dsfec_jax.modalities.registry import protocol
 from dsfec_jax.modalities.points.predict import Predictor
 from dsfec_jax.modalities.registry import modality_of
 from dsfec_jax.profile.records import profile
+from dsfec_jax.train.loop import COMPILE_USUAL
 from dsfec_jax.train.loss_watch import LossWatch, NonFiniteLoss
 from dsfec_jax.train.schedules import optimizer
 from dsfec_jax.train.step import batch_on_device, init_state, train_step_fn
@@ -184,23 +186,28 @@ def _train_and_rank(base: str, trials: list[dict], journal: Journal, todo: set[s
                                                 journal.path.parent / supernet_file(trials), log,
                                                 initial_variables(trials[0].get("init", "scratch")))
     recalibrate = recalibrator(trainee)
-    calib = calibration_batches(stream, PillarSpec.of(cfg))
-    val = load_frames(data, "val", recipe.val_frames, seed=0, features=family.points.input_columns)
+    with progress.stage("pillarizing the batch-norm calibration batches and loading the validation frames"):
+        calib = calibration_batches(stream, PillarSpec.of(cfg))
+        val = load_frames(data, "val", recipe.val_frames, seed=0, features=family.points.input_columns)
     predictor = SubnetPredictor(supernet, None, depths[0])
-    for trial, depth in zip(trials, depths):
-        if trial["key"] not in todo:
-            continue
+    pending = [(trial, depth) for trial, depth in zip(trials, depths) if trial["key"] in todo]
+    bar = tqdm(pending, desc=f"candidates (seed {seed})", unit="candidate")
+    for n, (trial, depth) in enumerate(bar):
         t1, c1 = time.perf_counter(), time.process_time()
         phases = {}  # wall seconds of each part of a candidate's evaluation (what a sweep's time goes to)
-        with _timed(phases, "recalibrate"):
-            stats = recalibrate({"params": state["params"], "batch_stats": state["batch_stats"]}, calib, depth)
-        predictor.variables, predictor.depth = {"params": state["params"], "batch_stats": stats}, depth
-        with _timed(phases, "validate"):
-            scores, tables = protocol(family.metric.name).validate(predictor, val, match_classes(family))
-        with _timed(phases, "profile"):
-            costs = measured_costs(journal, trial) or profile(
-                [zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats, warmup=1,
-                light=recipe.light_profile, modality_of=modality_of)[0]
+        # the first candidate also compiles the recalibration and the predictor; every one compiles its own profile
+        with progress.stage(f"scoring {trial['label']}: recalibrating batch norm, validating on {len(val)} frames, "
+                            f"profiling" + (" (the first also compiles the predictor)" if n == 0 else "")):
+            with _timed(phases, "recalibrate"):
+                stats = recalibrate({"params": state["params"], "batch_stats": state["batch_stats"]}, calib, depth)
+            predictor.variables, predictor.depth = {"params": state["params"], "batch_stats": stats}, depth
+            with _timed(phases, "validate"):
+                scores, tables = protocol(family.metric.name).validate(predictor, val, match_classes(family))
+            with _timed(phases, "profile"):
+                costs = measured_costs(journal, trial) or profile(
+                    [zoo.create(base, **trial["overrides"])], timing=True, repeats=recipe.latency_repeats, warmup=1,
+                    light=recipe.light_profile, modality_of=modality_of)[0]
+        bar.set_postfix({family.metric.headline: f"{scores[family.metric.headline]:.2f}"})
         journal.append({**trial, "status": "ok", **measured(scores, tables, costs),
                         "supernet": {net.field: list(getattr(cfg, net.field)), "steps": steps,
                                      "wall_s": round(supernet_s, 1), "cpu_s": round(supernet_cpu, 1)},
@@ -233,9 +240,10 @@ def supernet_file(trials: list[dict]) -> str:
     return f"supernet_{ident}.msgpack"
 
 
-def _check_supernet_losses(losses: LossWatch) -> None:
+def _check_supernet_losses(losses: LossWatch) -> float | None:
+    """The latest loss; FloatingPointError naming the first non-finite step since the last check."""
     try:
-        losses.check()
+        return losses.check()
     except NonFiniteLoss as err:
         raise FloatingPointError(f"supernet loss is {err.value} at step {err.step}") from err
 
@@ -255,19 +263,22 @@ def _supernet(supernet, stream, depths: list, recipe, steps: int, seed: int, pat
             log(f"supernet from {path} ({manifest['steps']} steps, trained in {manifest['wall_s']:.0f} s)")
             return state, manifest["wall_s"], manifest["cpu_s"]
     t0, c0 = time.perf_counter(), time.process_time()
-    state = init_state(supernet, tx, jax.random.key(seed), init)
+    with progress.stage("initialising the supernet (compiling its initialisation)"):
+        state = init_state(supernet, tx, jax.random.key(seed), init)
     step_fn = supernet_step(supernet, tx)
     losses = LossWatch()
+    field = zoo.family_of(supernet.config).supernet.field
     with Prefetcher(lambda s: batch_on_device(stream.batch(s)), range(steps)) as batches:
-        for step, batch in batches:
+        bar = tqdm(batches, total=steps, desc=f"supernet {tuple(getattr(supernet.config, field))}", unit="step")
+        for step, batch in bar:
             round_, pos = divmod(step, len(depths))
             i = int(np.random.default_rng([seed, 7, round_]).permutation(len(depths))[pos])
-            state, loss = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]}, depths[i])
+            with progress.stage("compiling the supernet's training step", usual=COMPILE_USUAL, enabled=step == 0):
+                state, loss = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]}, depths[i])
             losses.add(step, loss)
             if (step + 1) % LOSS_CHECK_EVERY == 0 or step + 1 == steps:  # always before the save below
-                _check_supernet_losses(losses)
+                bar.set_postfix(loss=f"{_check_supernet_losses(losses):.3f}")
     wall_s, cpu_s = time.perf_counter() - t0, time.process_time() - c0
-    field = zoo.family_of(supernet.config).supernet.field
     log(f"supernet {getattr(supernet.config, field)}: {steps} steps in {wall_s:.0f} s")
     checkpoint.save(path, state, {"steps": steps, "seed": seed, "wall_s": round(wall_s, 1), "cpu_s": round(cpu_s, 1),
                                   field: list(getattr(supernet.config, field))})

@@ -26,13 +26,15 @@ def pending(trials: list[dict], journal: Journal, retry_failed: bool = False) ->
 
 
 def run_local(trials: list[dict], run_dir: str | Path, retry_failed: bool = False,
-              log: Callable[[str], None] = print) -> list[dict]:
+              log: Callable[[str], None] = print, progress: bool = True) -> list[dict]:
+    """Run the pending trials here, one after another; `progress`: each trial's training bar and
+    stage lines (compiling, profiling) on stderr."""
     journal = Journal(run_dir)
     todo = pending(trials, journal, retry_failed)
     log(f"{len(trials) - len(todo)} of {len(trials)} trials already in {journal.path}; running {len(todo)}")
     for i, trial in enumerate(todo, 1):
         log(f"[{i}/{len(todo)}] {trial['label']} (seed {trial['seed']})")
-        record = run_trial(trial, run_dir)
+        record = run_trial(trial, run_dir, progress)
         journal.append(record)
         log(f"    {record['status']}: " + (summary(record) if record["status"] == "ok" else record["error"]))
     return journal.records()

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from dsfec_jax import zoo
 from dsfec_jax.core.environment import environment
+from dsfec_jax.core.progress import stage
 from dsfec_jax.profile.records import profile
 from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.modalities.registry import modality_of
@@ -50,12 +51,14 @@ def make_trial(base: str, candidate: dict, recipe: str, data: str, seed: int, st
     return {**spec, "key": trial_key(spec)}
 
 
-def run_trial(trial: dict, run_dir: str | Path) -> dict:
-    """Train and measure one candidate; a failure (NaN loss, OOM, ...) becomes a 'failed' record."""
+def run_trial(trial: dict, run_dir: str | Path, progress: bool = False) -> dict:
+    """Train and measure one candidate; a failure (NaN loss, OOM, ...) becomes a 'failed' record.
+    `progress`: the training bar and the compile / profile stage lines on stderr (a trial run here;
+    a Ray worker's stderr is a log, not a terminal)."""
     t0, c0 = time.perf_counter(), time.process_time()
     record = {k: jsonable(v) for k, v in trial.items()}
     try:
-        record.update(measure(trial, Path(run_dir) / "trials" / trial["key"]))
+        record.update(measure(trial, Path(run_dir) / "trials" / trial["key"], progress))
         record["status"] = "ok"
     except Exception as err:  # a trial must never stop the sweep
         record.update(status="failed", error=f"{type(err).__name__}: {err}",
@@ -126,7 +129,7 @@ def load_data(model, data: str, split: str, count: int):
     return modality_of(model).load_samples(zoo.family_of(model), data, split, count, 0)
 
 
-def _fit_trial(trial: dict, trial_dir: Path) -> dict:
+def _fit_trial(trial: dict, trial_dir: Path, progress: bool = False) -> dict:
     """Train (or resume) the trial's run -> its final validation scores, match tables included:
     the samples and the fit of the config's modality (whatever it reads)."""
     recipe = get_recipe(trial["recipe"], trial["base"])
@@ -135,17 +138,19 @@ def _fit_trial(trial: dict, trial_dir: Path) -> dict:
     frames, val = (load_data(cfg, trial["data"], split, n) for split, n in
                    (("train", recipe.train_frames), ("val", recipe.val_frames)))
     return modality_of(cfg).fit(cfg, frames, val, recipe.schedule, trial_dir, trial["seed"],
-                        run_info={"trial": jsonable(trial)}, progress=False,
+                        run_info={"trial": jsonable(trial)}, progress=progress,
                         init_variables=initial_variables(trial.get("init", "scratch")), overrides=overrides,
                         match_classes=match_classes(zoo.family_of(cfg)), **recipe.fit_options())[2]
 
 
-def measure(trial: dict, trial_dir: Path) -> dict:
+def measure(trial: dict, trial_dir: Path, progress: bool = False) -> dict:
     recipe = get_recipe(trial["recipe"], trial["base"])
-    scores = _fit_trial(trial, trial_dir)
+    scores = _fit_trial(trial, trial_dir, progress)
     tables = scores.pop("match_tables", {})
     # sizes and latency of the inference form (RadarNeXt: MobileOne branches fused), as the paper counts
     deployed = zoo.Detector(zoo.deploy_config(zoo.config(trial["base"], **trial["overrides"])))
-    costs = profile([deployed], timing=True, repeats=recipe.latency_repeats, warmup=1, light=recipe.light_profile,
-                    modality_of=modality_of)[0]
+    with stage(f"profiling {trial['label']}: compiling its inference network, timing "
+               f"{recipe.latency_repeats} runs", enabled=progress):
+        costs = profile([deployed], timing=True, repeats=recipe.latency_repeats, warmup=1,
+                        light=recipe.light_profile, modality_of=modality_of)[0]
     return measured(scores, tables, costs)

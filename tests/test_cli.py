@@ -1,4 +1,5 @@
 import json
+import re
 
 import numpy as np
 import pytest
@@ -19,7 +20,12 @@ def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
     assert cli.main(["train", "--model", tiny_model, "--steps", "3", "--batch-size", "2", "--frames", "4",
                      "--val-frames", "2", "--eval-every", "3", "--run-dir", str(run), "--max-pillars", "96",
                      "--window", "16"]) == 0
-    final = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    captured = capsys.readouterr()
+    final = json.loads(captured.out.strip().splitlines()[-1])
+    # the waits say what they are on stderr (the bar, each window's compile, the first validation's compile)
+    assert re.search(r"compiling tiny_s's training step \(training window [1-4] of 4\)\.\.\. \(usually", captured.err)
+    assert "validating tiny_s at step 3 (the first validation compiles the predictor): done in" in captured.err
+    assert "tiny_s: 100%" in captured.err
     assert set(final["final"]) == {"car_mAP", "car_AP4", "mAP", "class_mAP", "AP@4"}
     info = json.loads((run / "run.json").read_text())
     assert info["seed"] == 0 and info["config"]["name"] == "tiny_s" and info["versions"]["jax"]
@@ -33,7 +39,10 @@ def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
 
     assert cli.main(["eval", "--model", tiny_model, "--weights", str(ckpt), "--frames", "3", "--json",
                      "--max-pillars", "96"]) == 0
-    result = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    result = json.loads(captured.out)
+    assert "running the first batch (a JAX predictor compiles its network on it)..." in captured.err
+    assert "detecting in 3 frames: 100%" in captured.err
     assert result["frames"] == 3 and 0 <= result["car_AP4"] <= 100 and "AP" in result["metrics"]
 
     pred, gt, png = tmp_path / "pred.json", tmp_path / "gt.json", tmp_path / "png"

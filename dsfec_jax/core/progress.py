@@ -9,7 +9,13 @@ command's stdout (JSON, tables) stays machine-readable.
     with stage("compiling the training step", usual="60-130 s on 2 CPU cores"):
         state, metrics = step_fn(state, batch)
 
-`DSFEC_QUIET=1` silences every stage (tests that parse stderr, scripted runs).
+A loop of known length gets a bar instead (`bar`, tqdm on stderr), whose first item may run
+inside a stage: the item that compiles.
+
+    for start in bar(range(0, n, 8), "detecting", first="compiling the predictor"):
+        ...
+
+`DSFEC_QUIET=1` silences every stage and bar (tests that parse stderr, scripted runs).
 """
 
 from __future__ import annotations
@@ -19,9 +25,14 @@ import os
 import sys
 import threading
 import time
-from typing import Iterator, TextIO
+from typing import Iterable, Iterator, TextIO
+
+from tqdm import tqdm
 
 HEARTBEAT_S = 10.0  # a command is never quiet for longer than this while a stage runs
+GENERATION_DELAY_S = 2.0  # a generated data set quicker than this needs no bar
+# a predictor's first batch: the wait before its bar moves (an ONNX Runtime session has no compile)
+FIRST_BATCH = "running the first batch (a JAX predictor compiles its network on it)"
 
 
 def quiet() -> bool:
@@ -30,7 +41,9 @@ def quiet() -> bool:
 
 def _say(text: str, stream: TextIO | None) -> None:
     out = stream or sys.stderr
-    out.write(text + "\n")
+    # tqdm.write lifts any progress bar drawn on `out`, prints the line and redraws the bar: a
+    # heartbeat during a training bar's first (compiling) step lands on a line of its own
+    tqdm.write(text, file=out)
     out.flush()
 
 
@@ -58,3 +71,20 @@ def stage(what: str, usual: str | None = None, *, heartbeat_s: float = HEARTBEAT
         done.set()
         thread.join()
         _say(f"{what}: done in {time.perf_counter() - t0:.1f} s", stream)
+
+
+def bar(items: Iterable, desc: str, *, first: str | None = None, usual: str | None = None, enabled: bool = True,
+        **options) -> Iterator:
+    """`items` through a tqdm bar on stderr (`options` go to tqdm: total, unit, leave, ...); with
+    `first`, the caller's work on the first item runs inside stage(first, usual): a bar stands
+    still while its first item compiles, so that wait says what it is doing."""
+    for i, item in enumerate(tqdm(items, desc=desc, disable=not enabled or quiet(), **options)):
+        with stage(first or "", usual, enabled=enabled and first is not None and i == 0):
+            yield item  # the stage stays open until the caller asks for the second item
+
+
+def generating(items: Iterable, desc: str, **options) -> Iterator:
+    """A bar over data generated item by item (a synthetic benchmark): drawn only once the
+    generation has taken GENERATION_DELAY_S (the tiny sets of tests and scorers stay quiet) and
+    cleared when it ends."""
+    return bar(items, desc, delay=GENERATION_DELAY_S, leave=False, **options)

@@ -28,6 +28,7 @@ import numpy as np
 
 from .. import __version__
 from ..core import atomic
+from ..core.progress import generating
 from .paths import inside
 from .records import check_fields
 from .splits import SPLITS, check_index
@@ -69,7 +70,8 @@ class NpzCacheFormat:
         directory.mkdir(parents=True, exist_ok=True)
         (directory / MANIFEST).unlink(missing_ok=True)  # an unfinished rewrite must not look valid
         files = []
-        for i in range(len(dataset)):
+        for i in generating(range(len(dataset)), f"writing {len(dataset)} generated items to the cache {directory}",
+                            unit="item"):
             name = f"{self.prefix}_{i:06d}.npz"
             atomic.write_bytes(directory / name, self.encode(dataset[i]))
             files.append(name)

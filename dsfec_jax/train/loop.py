@@ -36,7 +36,7 @@ import jax
 import numpy as np
 from tqdm import tqdm
 
-from ..core import atomic, checkpoint
+from ..core import atomic, checkpoint, progress
 from ..core.provenance import jsonable, versions
 from ..data.batches import BatchStream
 from ..data.prefetch import Prefetcher
@@ -51,6 +51,10 @@ log = logging.getLogger(__name__)
 # run.json fields that say how a run was launched, not what it trains: a resume may differ in them
 LAUNCH_FIELDS = ("command", "versions", "resumes")
 SHOWN_DIFFERENCES = 8  # a changed model differs in many config fields: name the first few
+# What the first step of a run (and of each training window) costs before the bar moves: XLA
+# compiling the step. Measured on the 2-core dev box: 6 s for dsfec_s (docs/profiler.md's table),
+# 50 s for the YOLOv8n-Adapter NAS supernet at load 3 and 152 s at load 9
+COMPILE_USUAL = "5 s to 2.5 min on 2 CPU cores, by model and machine load"
 
 
 class TrainingDiverged(RuntimeError):
@@ -209,7 +213,8 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     previous = _started_with(spec.run_dir, run_info, type(detector.config))
     # a detector may bring its own optimizer (a sandwich-sampled supernet accumulates over its cycle)
     tx = (detector.optimizer if hasattr(detector, "optimizer") else optimizer)(spec.schedule, spec.total_steps)
-    state = _restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed), init_variables))
+    with progress.stage(f"initialising {detector.name} (compiling its initialisation)", enabled=spec.progress):
+        state = _restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed), init_variables))
     start = int(state["step"])
     _record_start(spec.run_dir, run_info, previous, start)
     log_path = spec.run_dir / "metrics.jsonl"
@@ -229,9 +234,13 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
 
     with open(log_path, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches:
         bar = tqdm(batches, initial=start, total=end, disable=not spec.progress, desc=detector.name)
+        compiled = set()  # the step functions (one per window) that have run: the first call compiles
         for step, batch in bar:
-            step_fn = step_fns[batch["window"] % len(step_fns)]
-            state, metrics = step_fn(state, {"inputs": batch["inputs"], "targets": batch["targets"]})
+            window = batch["window"] % len(step_fns)
+            with progress.stage(_compiling(detector.name, window, len(step_fns)), usual=COMPILE_USUAL,
+                                enabled=spec.progress and window not in compiled):
+                state, metrics = step_fns[window](state, {"inputs": batch["inputs"], "targets": batch["targets"]})
+            compiled.add(window)
             losses.add(step, metrics["loss"])
             dropped.add(step, batch)
             done = step + 1
@@ -249,9 +258,12 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                 log.write(json.dumps(row) + "\n")
                 log.flush()
             if eval_step:
-                if before_eval is not None:
-                    state = before_eval(state)
-                scores = evaluate(state)
+                with progress.stage(f"validating {detector.name} at step {done}"
+                                    + ("" if scores else " (the first validation compiles the predictor)"),
+                                    enabled=spec.progress):
+                    if before_eval is not None:
+                        state = before_eval(state)
+                    scores = evaluate(state)
                 log.write(json.dumps({"step": done, "eval": scores}) + "\n")
                 log.flush()
                 score = scores.get(best_key)  # None: nothing to score (e.g. no ground truth)
@@ -262,6 +274,11 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
             if save_step:
                 _save(spec, state, done, {"loss": loss})
     return state, scores
+
+
+def _compiling(name: str, window: int, windows: int) -> str:
+    where = f" (training window {window + 1} of {windows})" if windows > 1 else ""
+    return f"compiling {name}'s training step{where}"
 
 
 def _checked_loss(losses: LossWatch, name: str, run_dir: Path) -> float:

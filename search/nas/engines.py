@@ -81,7 +81,7 @@ def rd_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path, se
         raise ValueError(f"--sampling {sampling}: the RD supernet trains with uniform sampling only (sandwich: DSFEC-style spaces)")
     val = load_rd_samples("synthetic", "val", p.val_samples)
     train, steps, (det, subnet_inputs, state) = supernet(space, p, run_dir, seed, progress, load_only)
-    scorer = SubnetScorer(det, subnet_inputs, state, train, val, seed, p.calibration_batches, p.batch_size)
+    scorer = SubnetScorer(det, subnet_inputs, state, train, val, seed, p.calibration_batches, p.batch_size, progress)
     return Engine(steps, scorer, "mAP50", f"synthetic RD benchmark, {len(val)} val maps",
                   f"{p.calibration_batches} batches of {p.batch_size} maps", shipped=("yolov8n", space.base))
 
@@ -105,7 +105,7 @@ def point_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path,
                                                                        sampling=sampling)
     batch = recipe.schedule.batch_size
     calibration = max(1, p.calibration_batches * p.batch_size // batch)
-    scorer = PointSubnetScorer(det, validator, subnet_inputs, state, stream, val, calibration)
+    scorer = PointSubnetScorer(det, validator, subnet_inputs, state, stream, val, calibration, progress)
     shipped = zoo.shipped_weights(space.base)
     return Engine(steps, scorer, family.metric.headline,
                   f"`{recipe.data}` point-cloud benchmark at the `{profile}` search recipe's grid, {len(val)} val frames",

@@ -25,6 +25,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from dsfec_jax.core import atomic
+from dsfec_jax.core.progress import stage
 
 from ..journal import Journal
 from .space import Genes, SearchSpace, from_key, key
@@ -76,8 +77,9 @@ class Evolution:
 
     def __init__(self, space: SearchSpace, scores: Scores, costs: Costs, run_dir: str | Path,
                  settings: EvolutionSettings = EvolutionSettings(), limits: dict | None = None,
-                 log: Callable[[str], None] = print):
+                 log: Callable[[str], None] = print, progress: bool = False):
         self.space, self.scores, self.costs, self.settings = space, scores, costs, settings
+        self.progress = progress  # a stage line while a generation's subnets are drawn and sized
         self.limits = dict(limits or {})
         self.run_dir = Path(run_dir)
         self.journal = Journal(self.run_dir)
@@ -110,7 +112,10 @@ class Evolution:
         top = list(state["generations"][-1]["top"]) if done else []
         for g in range(done, self.settings.generations):
             rng = np.random.default_rng([self.settings.seed, g])
-            proposed, rejected = self.propose(g, rng, top, visited)
+            # sizing a new subnet traces its network (seconds each): a generation's draw can take a minute
+            with stage(f"generation {g}: drawing {self.settings.population} subnets and tracing their sizes",
+                       enabled=self.progress):
+                proposed, rejected = self.propose(g, rng, top, visited)
             records = self.score_missing(proposed, g)
             top = self.top_k(top + [key(p) for p in proposed], records)
             visited.update(key(p) for p in proposed)

@@ -105,7 +105,7 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
                                                    max_workers=p.population, log=log))
         if strategy == "evolution":
             settings = EvolutionSettings(p.population, p.generations, p.top_k, metric=metric, seed=seed)
-            progress_text = progress_table(Evolution(space, scorer, costs, run_dir, settings, limits, log).run())
+            progress_text = progress_table(Evolution(space, scorer, costs, run_dir, settings, limits, log, progress).run())
         else:
             from .nsga import pareto_front, run_nsga2
 
@@ -132,7 +132,8 @@ def run_nas(space_name: str, run_dir: str | Path, profile: str = "quick", strate
             f"across the ranking, and {space.base}'s own architecture as the reference) in {run_dir / 'standalone'}")
         # the hand-designed architecture trained the same way: the reference the searched ones face
         extra = [] if any(r["key"] == key(hand) for r in chosen) else [{"key": key(hand)}]
-        trained = retrain(space, chosen + extra, run_dir, profile, seed, backend, address, command, log, engine.init)
+        trained = retrain(space, chosen + extra, run_dir, profile, seed, backend, address, command, log, engine.init,
+                          progress)
         references += standalone_reference(space.base, hand, trained, costs, metric)
         study = ranking_study(chosen, trained, metric, oneshot_s, len(records))
         atomic.write_json(run_dir / "ranking.json", study)

@@ -28,9 +28,11 @@ from typing import Sequence
 import jax
 import jax.numpy as jnp
 import numpy as np
+from tqdm import tqdm
 
 from dsfec_jax import zoo
 from dsfec_jax.core import checkpoint
+from dsfec_jax.core.progress import stage
 from dsfec_jax.core.provenance import jsonable, versions
 from dsfec_jax.data.rd.augment import RDAugment
 from dsfec_jax.data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
@@ -48,6 +50,9 @@ from .space import Genes, SearchSpace
 
 SALT = 23  # separates the subnet draws from the batch order's random streams
 CALIBRATION_BATCHES = 16
+# the first subnet a scorer scores compiles its recalibration and predictor: 56 s for the
+# YOLOv8n-Adapter smoke run on the 2-core dev box at load 9, under half that at load 3
+SCORER_COMPILE_USUAL = "up to a minute on 2 CPU cores"
 
 
 class SupernetDetector:
@@ -159,7 +164,9 @@ def train_supernet(space: SearchSpace, samples, schedule: Schedule, run_dir: str
     """Train (or resume) the space's supernet by SPOS in run_dir -> (SupernetDetector, SubnetInputs, state).
     `load_only`: nothing trains or writes; the state is the finished run's (finished_supernet)."""
     supernet = supernet_of(space)
-    det, subnet_inputs = SupernetDetector(supernet), SubnetInputs(space, supernet)
+    with stage(f"tracing the widths each of {space.name}'s choices sets (the subnet mask table)",
+               enabled=progress and not load_only):
+        det, subnet_inputs = SupernetDetector(supernet), SubnetInputs(space, supernet)
     if load_only:
         return det, subnet_inputs, finished_supernet(run_dir, steps)
     cfg = supernet.config
@@ -213,22 +220,33 @@ def recalibrator(det, momentum: float = BN_MOMENTUM):
 
 def score_inherited(scorer, batch: list[Genes]) -> list[dict]:
     """A scorer's loop over subnets (the RD and point scorers share it): recalibrate the subnet's BN
-    statistics, put them and the subnet into the predictor, `scorer.evaluate()`."""
+    statistics, put them and the subnet into the predictor, `scorer.evaluate()`. With
+    `scorer.progress`, a bar over the subnets on stderr, and a stage line while the scorer's first
+    subnet compiles the recalibration and the predictor (one compile serves every subnet)."""
     out = []
-    for genes in batch:
-        subnet = scorer.subnet_inputs(genes)
-        stats = scorer.recalibrate({"params": scorer.params, "batch_stats": scorer.start_stats}, scorer.batches, subnet)
-        scorer.predictor.variables = {"params": scorer.params, "batch_stats": stats}
-        scorer.predictor.subnet = subnet
-        out.append(scorer.evaluate())
+    for genes in tqdm(batch, desc="scoring subnets", unit="subnet", leave=False, disable=not scorer.progress):
+        with stage("compiling the subnet scorer (batch-norm recalibration and the predictor)",
+                   usual=SCORER_COMPILE_USUAL, enabled=scorer.progress and not scorer.warm):
+            subnet = scorer.subnet_inputs(genes)
+            stats = scorer.recalibrate({"params": scorer.params, "batch_stats": scorer.start_stats}, scorer.batches,
+                                       subnet)
+            scorer.predictor.variables = {"params": scorer.params, "batch_stats": stats}
+            scorer.predictor.subnet = subnet
+            out.append(scorer.evaluate())
+        scorer.warm = True
     return out
 
 
 class SubnetScorer:
-    """score(list of genes) -> [{'mAP50', 'mAP50_95', 'mAP30'}] with inherited, recalibrated weights."""
+    """score(list of genes) -> [{'mAP50', 'mAP50_95', 'mAP30'}] with inherited, recalibrated weights;
+    `progress`: score_inherited's bar and compile line on stderr."""
+
+    warm = False  # set once a subnet was scored: the compiled functions are cached
 
     def __init__(self, det: SupernetDetector, subnet_inputs: SubnetInputs, state: dict, train_samples, val_samples,
-                 seed: int = 0, calibration_batches: int = CALIBRATION_BATCHES, batch_size: int = 16):
+                 seed: int = 0, calibration_batches: int = CALIBRATION_BATCHES, batch_size: int = 16,
+                 progress: bool = False):
+        self.progress = progress
         self.det, self.subnet_inputs, self.val = det, subnet_inputs, val_samples
         self.params = state["params"]
         stream = RDBatchStream(train_samples, batch_size, seed, None, RDRepresentation(), det.config.classes,

@@ -155,10 +155,14 @@ class SubnetPointPredictor(Predictor):
 
 
 class PointSubnetScorer:
-    """score(list of genes) -> [{headline and scalar protocol scores}] with inherited, recalibrated weights."""
+    """score(list of genes) -> [{headline and scalar protocol scores}] with inherited, recalibrated weights;
+    `progress`: score_inherited's bar and compile line on stderr."""
+
+    warm = False  # set once a subnet was scored: the compiled functions are cached
 
     def __init__(self, det: PointSupernet, validator: PointSupernet, subnet_inputs: PointSubnetInputs, state: dict,
-                 stream: BatchStream, val_frames, calibration: int):
+                 stream: BatchStream, val_frames, calibration: int, progress: bool = False):
+        self.progress = progress
         self.family = zoo.family_of(det.config)
         self.subnet_inputs, self.val, self.params = subnet_inputs, val_frames, state["params"]
         self.batches = [b["inputs"] for b in calibration_batches(stream, PillarSpec.of(det.config))[:calibration]]

@@ -58,10 +58,11 @@ def choose(records: list[dict], metric: str, top: int, spread: int, spread_by: s
 
 def retrain(space: SearchSpace, chosen: list[dict], run_dir: Path, recipe: str, seed: int = 0,
             backend: str = "local", address: str | None = None, command: str = "",
-            log: Callable[[str], None] = print, init: str | None = None) -> list[dict]:
+            log: Callable[[str], None] = print, init: str | None = None, progress: bool = True) -> list[dict]:
     """Train every chosen subnet stand-alone (one search trial each, the family's `recipe`) -> the
     journal's records of the chosen ones. `init`: the weights every subnet starts from
-    (search.inherit.describe; the supernet's own start), else the recipe's choice."""
+    (search.inherit.describe; the supernet's own start), else the recipe's choice. `progress`: each
+    local trial's bar and stage lines on stderr."""
     out = run_dir / SUBDIR
     data = get_recipe(recipe, space.base).data
     trials = [make_trial(space.base, {"label": r["key"], "overrides": space.overrides(from_key(r["key"]))},
@@ -73,7 +74,7 @@ def retrain(space: SearchSpace, chosen: list[dict], run_dir: Path, recipe: str, 
     if backend == "ray":
         run_ray(trials, out, address)
     else:
-        run_local(trials, out, log=log)
+        run_local(trials, out, log=log, progress=progress)
     write_reports(out)
     keys = {t["key"] for t in trials}
     return [r for r in Journal(out).records() if r["key"] in keys]

@@ -34,3 +34,36 @@ def test_quiet_silences_every_stage(monkeypatch):
     with progress.stage("compiling", heartbeat_s=0.01, stream=out):
         time.sleep(0.05)
     assert out.getvalue() == ""
+
+
+def test_a_bar_runs_its_first_item_inside_a_stage_and_draws_on_stderr(capsys):
+    seen = []
+    for item in progress.bar(range(3), "detecting", first="compiling the predictor", unit="batch"):
+        seen.append(item)
+        if item == 0:
+            time.sleep(0.05)  # the first item's work happens while the stage is open
+    err = capsys.readouterr().err
+    assert seen == [0, 1, 2] and "detecting" in err and "3/3" in err
+    assert err.count("compiling the predictor...") == 1
+    assert re.search(r"compiling the predictor: done in 0\.\d s", err)
+    assert capsys.readouterr().out == ""
+
+
+def test_a_stage_line_lifts_a_running_bar_onto_a_line_of_its_own(capsys):
+    from tqdm import tqdm
+
+    with tqdm(total=2, desc="training") as bar:
+        bar.update(1)
+        with progress.stage("compiling"):
+            pass
+    lines = capsys.readouterr().err.replace("\r", "\n").splitlines()
+    assert "compiling..." in lines  # not glued to the end of the bar's line
+
+
+def test_a_generation_bar_shows_only_once_the_generation_is_slow(capsys, monkeypatch):
+    monkeypatch.setattr(progress, "GENERATION_DELAY_S", 0.05)  # the 2 s of a real generation, scaled down
+    assert list(progress.generating(range(2), "generating quick maps")) == [0, 1]  # done before the delay
+    assert "generating quick maps" not in capsys.readouterr().err
+    for _ in progress.generating(range(4), "generating slow maps"):
+        time.sleep(0.04)
+    assert "generating slow maps" in capsys.readouterr().err

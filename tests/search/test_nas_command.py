@@ -13,15 +13,23 @@ from search.nas.space import from_key, key
 from search.nas.spaces import get_space
 
 
-def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
+def test_nas_command_runs_end_to_end(tmp_path, monkeypatch, capsys):
     from dsfec_jax.models.yolo_rd.variants import searched_variants
     import search.nas.register
 
     run_dir, searched = tmp_path / "nas", tmp_path / "searched.json"
     monkeypatch.setattr(search.nas.register, "SEARCHED", searched)  # never the package's own file
     assert main(["--space", "yolov8n_adapter", "--profile", "smoke", "--max-params", "2.0e6", "--run-dir", str(run_dir),
-                 "--no-progress", "--register", "smoke_search", "--standalone", "1", "--spread", "1",
+                 "--register", "smoke_search", "--standalone", "1", "--spread", "1",
                  "--record", str(tmp_path / "ranking.json")]) == 0
+    err = capsys.readouterr().err  # every long wait says what it is doing, on stderr
+    for wait in ("tracing the widths each of yolov8n_adapter's choices sets", "initialising yolov8n_adapter_supernet",
+                 "compiling yolov8n_adapter_supernet's training step... (usually", "yolov8n_adapter_supernet: 100%",
+                 "generation 1: drawing 6 subnets and tracing their sizes", "compiling the subnet scorer",
+                 "scoring subnets", "profiling "):
+        assert wait in err, wait
+    # one compile serves every subnet of both generations
+    assert err.count("compiling the subnet scorer (batch-norm recalibration and the predictor)...") == 1
     records = [json.loads(line) for line in (run_dir / "journal.jsonl").read_text().splitlines()]
     assert len(records) == len({r["key"] for r in records}) >= 6
     assert all(r["costs"]["params"] <= 2.0e6 and 0 <= r["mAP50"] <= 100 and len(from_key(r["key"])) == 18 for r in records)
@@ -57,7 +65,7 @@ def test_nas_command_runs_end_to_end(tmp_path, monkeypatch):
     assert cfg.name == "smoke_search" and cfg.backbone_width_ratios == tuple(best["choices"][f"backbone{b}"] for b in range(1, 6))
 
 
-def test_dsfec_space_searches_retrains_and_registers(tmp_path, monkeypatch):
+def test_dsfec_space_searches_retrains_and_registers(tmp_path, monkeypatch, capsys):
     """The DSFEC width x depth x stem supernet through the same command: searched under a latency
     limit (a table built here from two measured subnets), retrained stand-alone from the base's
     leading channels, registered in the DSFEC family's searched.json."""
@@ -76,6 +84,8 @@ def test_dsfec_space_searches_retrains_and_registers(tmp_path, monkeypatch):
     assert main(["--space", "dsfec", "--profile", "smoke", "--max-latency-ms", "2", "--latency-table", str(table),
                  "--run-dir", str(run_dir), "--no-progress", "--register", "dsfec_smoke_search",
                  "--standalone", "1", "--spread", "1"]) == 0
+    err = capsys.readouterr().err  # --no-progress: no bar, no stage line (the stand-alone trials' too)
+    assert "compiling" not in err and "scoring subnets" not in err and "profiling" not in err
     records = [json.loads(line) for line in (run_dir / "journal.jsonl").read_text().splitlines()]
     assert len(records) >= 6 and all(r["costs"]["latency_ms"] <= 2 and 0 <= r["car_mAP"] <= 100 for r in records)
     run = json.loads((run_dir / "supernet" / "run.json").read_text())

@@ -65,6 +65,9 @@ def test_real_sweep_trains_measures_and_reports(tiny_search, tmp_path, capsys):
     out = tmp_path / "run"
     assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "train",
                         "--out", str(out)]) == 0
+    err = capsys.readouterr().err  # each trial says what it waits on: its training bar, compile and profile
+    assert err.count(f"compiling {tiny_search}'s training step...") == 2 and f"{tiny_search}: 100%" in err
+    assert "profiling stage2_blocks=1: compiling its inference network" in err
     records = Journal(out).records()
     assert [r["status"] for r in records] == ["ok", "ok"], [r.get("error") for r in records]
     g = [r["costs"]["gflops"] for r in records]
@@ -85,7 +88,7 @@ def test_real_sweep_trains_measures_and_reports(tiny_search, tmp_path, capsys):
 
 
 def fake_measure(calls, fail_label=None):
-    def measure(t, trial_dir):
+    def measure(t, trial_dir, progress=False):
         calls.append(t["label"])
         if t["label"] == fail_label:
             raise FloatingPointError("loss is nan at step 3")
@@ -198,12 +201,17 @@ def test_ray_backend_runs_a_two_trial_sweep(tmp_path, monkeypatch):
     assert (out / "report.md").exists()
 
 
-def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path, monkeypatch):
+def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path, monkeypatch, capsys):
     from search import oneshot
 
     out = tmp_path / "oneshot"
     assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "oneshot",
                         "--seeds", "2", "--supernet-steps", "4", "--out", str(out)]) == 0
+    err = capsys.readouterr().err  # the supernet's bar and compile, then a bar over the candidates
+    assert err.count("compiling the supernet's training step... (usually") == 2
+    assert "supernet (1, 2, 1, 1): 100%" in err and "| 4/4 [" in err
+    assert "candidates (seed 0): 100%" in err and "candidates (seed 1): 100%" in err
+    assert "scoring stage2_blocks=2: recalibrating batch norm, validating on 2 frames, profiling" in err
     records = Journal(out).records()
     assert [r["status"] for r in records] == ["ok"] * 4, [r.get("error") for r in records]
     assert [r["seed"] for r in records] == [0, 0, 1, 1] and len(list(out.glob("supernet_*.msgpack"))) == 2

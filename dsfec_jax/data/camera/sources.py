@@ -27,6 +27,7 @@ import dataclasses
 from pathlib import Path
 from typing import Sequence
 
+from ...core.progress import generating
 from ..splits import SPLITS, check_index
 from . import voc
 from .images import CameraImage
@@ -150,7 +151,8 @@ def load_camera_images(data: str, split: str, count: int | None = None, seed: in
         from .street import StreetDataset
         dataset = StreetDataset(street_config(), split, seed, count or STREET_FRAMES)
         if not path:
-            return [street_image(frame) for frame in dataset]
+            return [street_image(frame) for frame in
+                    generating(dataset, f"rendering {len(dataset)} street frames ({split})", unit="frame")]
         from .street.cache import StreetCachedDataset
         folder = Path(path) / f"{split}-seed{seed}-{len(dataset)}"
         return StreetCacheImages(StreetCachedDataset.open(folder, dataset))

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ...core.progress import generating
 from .sample import RDSample
 
 SOURCE_KINDS = ("synthetic", "rd-synthetic", "raddet:PATH", "carrada:PATH")
@@ -32,7 +33,8 @@ def load_rd_samples(data: str, split: str, count: int | None = None, seed: int =
         from .synthetic import SPLITS, RDSyntheticDataset
         if split not in SPLITS:
             raise NoSamples(f"--data {data}: splits are {SPLITS}, not {split!r}")
-        return list(RDSyntheticDataset(split=split, seed=seed, num_samples=count or SYNTHETIC_SAMPLES))
+        dataset = RDSyntheticDataset(split=split, seed=seed, num_samples=count or SYNTHETIC_SAMPLES)
+        return list(generating(dataset, f"generating {len(dataset)} synthetic RD maps ({split})", unit="map"))
     if kind not in ("raddet", "carrada"):
         raise ValueError(f"--data {data!r}: expected one of {', '.join(SOURCE_KINDS)}")
     if not path or not Path(path).exists():

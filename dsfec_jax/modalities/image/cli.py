@@ -194,7 +194,7 @@ def eval_or_predict(args, cfg) -> tuple:
         _images(args, args.split, args.frames)
     predictor = onnx or _predictor(args, cfg, threshold)
     try:  # images are decoded as the loop reaches them
-        detections = predictor.predict_samples(images)
+        detections = predictor.predict_samples(images, progress=True)
         if args.command == "predict":
             write_predictions(args, images, detections, predictor)
     except UnreadableImage as err:

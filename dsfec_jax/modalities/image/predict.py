@@ -22,6 +22,7 @@ import jax
 import numpy as np
 
 from ..checks import require_modality
+from ...core.progress import FIRST_BATCH, bar
 from ...boxes.boxes2d import Boxes2D
 from ...data.camera.batches import eval_input
 from ...data.camera.images import CameraImage
@@ -85,10 +86,13 @@ class CameraPipeline:
         return detections(boxes, scores, self.model_classes, score_threshold=self.score_threshold,
                           iou_threshold=self.nms_iou, max_detections=self.max_detections)
 
-    def predict_samples(self, images: Sequence[CameraImage], batch_size: int = 8) -> dict[str, Boxes2D]:
-        """image id -> detections in that image's pixels, batches of one input shape at a time."""
+    def predict_samples(self, images: Sequence[CameraImage], batch_size: int = 8,
+                        progress: bool = False) -> dict[str, Boxes2D]:
+        """image id -> detections in that image's pixels, batches of one input shape at a time;
+        `progress`: a bar over the batches on stderr (the commands' eval and predict)."""
         out = {}
-        for start in range(0, len(images), batch_size):
+        for start in bar(range(0, len(images), batch_size), f"detecting in {len(images)} images", first=FIRST_BATCH,
+                         enabled=progress, unit="batch"):
             chunk = [images[i] for i in range(start, min(start + batch_size, len(images)))]
             groups: dict[tuple[int, int], list[CameraImage]] = {}
             for item in chunk:

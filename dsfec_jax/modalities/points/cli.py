@@ -95,7 +95,7 @@ def eval_or_predict(args, cfg) -> tuple:
             frames = _frames(args, cfg, args.split, args.frames)
         except NoFrames as err:
             sys.exit(f"dsfec {args.command}: {err}")
-    detections = predictor.predict_samples(frames)
+    detections = predictor.predict_samples(frames, progress=True)
     if args.command == "predict":
         write_predictions(args, frames, detections, predictor)
     return frames, detections, predictor, {"score_threshold": threshold}

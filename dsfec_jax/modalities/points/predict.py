@@ -13,6 +13,7 @@ from ...boxes import priors
 from ...boxes.nms import batched_rotated_nms
 from ...boxes.structures import Boxes
 from ...data.points.frame import Frame
+from ...core.progress import FIRST_BATCH, bar
 from ...data.points.pillarize import PillarSpec, pillarize, select_columns
 
 
@@ -54,11 +55,13 @@ class HostPipeline:
     def __call__(self, points) -> Detections:
         return self._detect([points])[0]
 
-    def predict_samples(self, frames: Sequence[Frame], batch_size: int = 8) -> dict[str, Detections]:
+    def predict_samples(self, frames: Sequence[Frame], batch_size: int = 8,
+                        progress: bool = False) -> dict[str, Detections]:
         """frame id -> detections, `batch_size` frames a network call (every modality's predictor
-        has this verb: modalities/base.py)."""
+        has this verb: modalities/base.py); `progress`: a bar over the batches on stderr."""
         out = {}
-        for start in range(0, len(frames), batch_size):
+        for start in bar(range(0, len(frames), batch_size), f"detecting in {len(frames)} frames", first=FIRST_BATCH,
+                         enabled=progress, unit="batch"):
             chunk = [frames[i] for i in range(start, min(start + batch_size, len(frames)))]
             for frame, found in zip(chunk, self._detect(chunk)):
                 out[frame.frame_id] = found

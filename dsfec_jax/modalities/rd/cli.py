@@ -99,7 +99,7 @@ def eval_or_predict(args, cfg) -> tuple:
     samples = files.items_or_exit(args, READER, cfg) if getattr(args, "input", None) else \
         _samples(args, args.split, args.frames)
     predictor = _predictor(args, cfg, threshold)
-    detections = predictor.predict_samples(samples)
+    detections = predictor.predict_samples(samples, progress=True)
     if args.command == "predict":
         write_predictions(args, samples, detections, predictor)
     return samples, detections, predictor, {"score_threshold": threshold}

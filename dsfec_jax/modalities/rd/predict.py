@@ -14,6 +14,7 @@ import jax
 import numpy as np
 
 from ..checks import require_modality
+from ...core.progress import FIRST_BATCH, bar
 from ...boxes.boxes2d import Boxes2D
 from ...data.rd.batches import boxes_to_map, rd_eval_inputs
 from ...data.rd.representations import RDRepresentation
@@ -57,11 +58,14 @@ class RDPipeline:
     def __call__(self, sample: RDSample) -> Boxes2D:
         return self.predict_samples([sample])[sample.sample_id]
 
-    def predict_samples(self, samples: Sequence[RDSample], batch_size: int = 8) -> dict[str, Boxes2D]:
-        """sample id -> detections (map pixels, scores), in batches of maps of one fitted size."""
+    def predict_samples(self, samples: Sequence[RDSample], batch_size: int = 8,
+                        progress: bool = False) -> dict[str, Boxes2D]:
+        """sample id -> detections (map pixels, scores), in batches of maps of one fitted size;
+        `progress`: a bar over the batches on stderr (the commands' eval and predict)."""
         out = {}
         samples = [samples[i] for i in range(len(samples))]
-        for start in range(0, len(samples), batch_size):
+        for start in bar(range(0, len(samples), batch_size), f"detecting in {len(samples)} maps", first=FIRST_BATCH,
+                         enabled=progress, unit="batch"):
             chunk = [rd_eval_inputs(s, self.representation, self.classes) for s in samples[start:start + batch_size]]
             for group in _same_size(chunk):
                 inputs = {k: np.concatenate([chunk[i][k] for i in group]) for k in self.input_names}

@@ -40,7 +40,10 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
 
     assert cli.main(["eval", "--model", "shuffle_yolov3", "--weights", str(best), "--data", "street", "--split",
                      "val", "--frames", "2", "--size", "64", "--json", *TINY]) == 0
-    result = last_json(capsys)
+    captured = capsys.readouterr()
+    result = json.loads(captured.out)
+    assert "running the first batch (a JAX predictor compiles its network on it)" in captured.err
+    assert "detecting in 2 images: 100%" in captured.err  # the bar is on stderr, the JSON alone on stdout
     assert KEYS <= set(result) and result["protocol"] == "camera_voc" and result["score_threshold"] == 0.005
     assert result["mAP50"] == final["mAP50"] and result["classes_scored"] == STREET  # validation's images
 

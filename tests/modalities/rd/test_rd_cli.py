@@ -37,7 +37,9 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
     assert best.is_file()
 
     assert cli.main(["eval", "--model", "yolov8n", "--weights", str(best), "--frames", "2", "--json"]) == 0
-    result = last_json(capsys)
+    captured = capsys.readouterr()
+    result = json.loads(captured.out)
+    assert "detecting in 2 maps: 100%" in captured.err  # the bar is on stderr, the JSON alone on stdout
     assert RD_KEYS <= set(result) and result["protocol"] == "rd_coco" and result["frames"] == result["samples"] == 2
     assert result["score_threshold"] == 0.001 and result["split"] == "test"  # the paper's evaluation conf
 

@@ -27,6 +27,7 @@ from .... import __version__
 from ....boxes.boxes2d import Boxes2D
 from ....core import atomic
 from ....core.png import png_bytes
+from ....core.progress import generating
 from ...npz_cache import MANIFEST, NpzCachedDataset, NpzCacheFormat, npz_meta
 from ...paths import inside
 from ...records import check_fields
@@ -89,7 +90,8 @@ class StreetCacheFormat(NpzCacheFormat):
         directory.mkdir(parents=True, exist_ok=True)
         (directory / MANIFEST).unlink(missing_ok=True)  # an unfinished rewrite must not look valid
         files, images, rights = [], [], []
-        for i in range(len(dataset)):
+        for i in generating(range(len(dataset)), f"rendering {len(dataset)} street frames into the cache {directory}",
+                            unit="frame"):
             frame = dataset[i]
             stem = f"{self.prefix}_{i:06d}"
             atomic.write_bytes(directory / f"{stem}.png", png_bytes(frame.image))
