@@ -268,10 +268,13 @@ def ship_source(args) -> tuple[Path, dict]:
 def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
     """What a weights manifest records: the family's protocol on `frames` items of `split` of its
     embedded synthetic benchmark (data seed 0), the keys its protocol keeps."""
+    from .core.progress import stage
     from .modalities.registry import modality_named, protocol
 
-    data = modality_named(family.modality).load_samples(family, family.benchmark, split, frames, 0)
-    scores, _ = protocol(family.metric.name).validate(predictor, data)
+    # generating the benchmark and validating on it (the first split also compiles the predictor)
+    with stage(f"measuring on {frames} {split} items of the {family.benchmark} benchmark"):
+        data = modality_named(family.modality).load_samples(family, family.benchmark, split, frames, 0)
+        scores, _ = protocol(family.metric.name).validate(predictor, data)
     return {k: scores[k] for k in family.metric.keep} | {
         "frames": frames, "data_seed": 0, "data": family.benchmark, "protocol": family.metric.name}
 
