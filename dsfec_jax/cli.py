@@ -284,6 +284,7 @@ def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
     from .core import progress
     from .modalities.registry import modality_named, protocol
 
+    # generating the benchmark and validating on it (the first split also compiles the predictor)
     with progress.stage(f"measuring {family.metric.name} on {frames} {split} frames of {family.benchmark} "
                         f"for the manifest"):
         data = modality_named(family.modality).load_samples(family, family.benchmark, split, frames, 0)

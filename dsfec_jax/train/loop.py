@@ -52,9 +52,10 @@ log = logging.getLogger(__name__)
 LAUNCH_FIELDS = ("command", "versions", "resumes")
 SHOWN_DIFFERENCES = 8  # a changed model differs in many config fields: name the first few
 # What the first step of a run (and of each training window) costs before the bar moves: XLA
-# compiling the step. Measured on the 2-core dev box: 6 s for dsfec_s (docs/profiler.md's table),
-# 50 s for the YOLOv8n-Adapter NAS supernet at load 3 and 152 s at load 9
-COMPILE_USUAL = "5 s to 2.5 min on 2 CPU cores, by model and machine load"
+# compiling the step. Measured on the 2-core dev box (`dsfec train`, `python -m search.nas`):
+# 21-27 s for each of dsfec_s's 4 windows at load 3, 50 s for the YOLOv8n-Adapter NAS supernet
+# at load 3 and 152 s at load 9
+COMPILE_USUAL = "20 s to 2.5 min on 2 CPU cores, by model and machine load"
 
 
 class TrainingDiverged(RuntimeError):

@@ -144,7 +144,7 @@ def test_eval_keeps_the_papers_confidence_unless_told(monkeypatch, capsys):
     class Quiet:
         classes = zoo.config("yolov8n").classes
 
-        def predict_samples(self, samples):
+        def predict_samples(self, samples, progress=False):
             return {s.sample_id: Boxes2D.empty(with_scores=True) for s in samples}
 
     def fake_predictor(detector, variables, score_threshold):
@@ -226,7 +226,7 @@ def test_export_quantize_and_onnx_eval_reach_the_rd_deploy_functions(monkeypatch
             self.manifest = {"model": "yolov8s" if "other" in str(export_dir) else "yolov8n"}
             calls["ort"] = score_threshold
 
-        def predict_samples(self, samples):
+        def predict_samples(self, samples, progress=False):
             return {s.sample_id: Boxes2D.empty(with_scores=True) for s in samples}
 
     monkeypatch.setattr(export_rd, "export_rd", fake_export)
