@@ -29,7 +29,7 @@ from typing import Iterable, Iterator, TextIO
 
 from tqdm import tqdm
 
-HEARTBEAT_S = 10.0  # a command is never quiet for longer than this while a stage runs
+HEARTBEAT_S = 8.0  # under the 10 s a command may stay quiet, with room for a busy scheduler
 GENERATION_DELAY_S = 2.0  # a generated data set quicker than this needs no bar
 # a predictor's first batch: the wait before its bar moves (an ONNX Runtime session has no compile)
 FIRST_BATCH = "running the first batch (a JAX predictor compiles its network on it)"

@@ -22,7 +22,7 @@ import jax
 import numpy as np
 
 from ..checks import require_modality
-from ...core.progress import FIRST_BATCH, bar
+from ...core.progress import FIRST_BATCH, bar, stage
 from ...boxes.boxes2d import Boxes2D
 from ...data.camera.batches import eval_input
 from ...data.camera.images import CameraImage
@@ -90,7 +90,7 @@ class CameraPipeline:
                         progress: bool = False) -> dict[str, Boxes2D]:
         """image id -> detections in that image's pixels, batches of one input shape at a time;
         `progress`: a bar over the batches on stderr (the commands' eval and predict)."""
-        out = {}
+        out, shapes = {}, set()
         for start in bar(range(0, len(images), batch_size), f"detecting in {len(images)} images", first=FIRST_BATCH,
                          enabled=progress, unit="batch"):
             chunk = [images[i] for i in range(start, min(start + batch_size, len(images)))]
@@ -99,7 +99,14 @@ class CameraPipeline:
                 groups.setdefault(self.input_hw(item.hw), []).append(item)
             for hw, members in groups.items():
                 batch, affines = self.letterboxed(members, hw)
-                for item, affine, dets in zip(members, affines, self.postprocess(*self.decoded(batch))):
+                # photos of other aspect ratios letterbox to other shapes: each new one compiles again,
+                # for longer than the bar's refresh on a busy machine (the first batch has its own line)
+                new = bool(shapes) and batch.shape not in shapes
+                shapes.add(batch.shape)
+                with stage(f"running a new input shape, {len(members)} x {hw[0]} x {hw[1]} (a JAX predictor compiles "
+                           f"for it)", enabled=progress and new):
+                    decoded = self.decoded(batch)
+                for item, affine, dets in zip(members, affines, self.postprocess(*decoded)):
                     out[item.image_id] = self.in_image(dets, affine, item.hw)
         return out
 

@@ -98,3 +98,19 @@ def test_a_png_draws_boxes_flat_on_the_image_edge(tmp_path):
                    np.ones(2, np.float32))
     image = np.asarray(Image.open(save_camera_png(item, tmp_path / "im.png", flat)))
     assert (image[29] == PREDICTION).all() and (image[5, 5:15] == PREDICTION).all()
+
+
+def test_each_new_input_shape_says_it_compiles(capsys):
+    """Photos of other aspect ratios letterbox to other shapes and compile again (tens of seconds
+    on a busy machine): with progress on, each new shape after the first gets its own line."""
+    box, hw = (100.0, 52.0, 180.0, 120.0), (234, 416)
+    predictor, seen = predictor_with_outputs(box, hw, (256, 416))
+    street = [CameraImage(f"s{i}", np.zeros((*hw, 3), np.uint8), Boxes2D.empty()) for i in range(2)]
+    portrait = CameraImage("p", np.zeros((500, 375, 3), np.uint8), Boxes2D.empty())
+    predictor.predict_samples(street + [portrait] + street, batch_size=2, progress=True)
+    said = capsys.readouterr().err
+    assert len(set(seen)) == 3  # (2, 256, 416), (1, 416, 320), (1, 256, 416)
+    assert said.count("(a JAX predictor compiles for it): done in") == 2, said
+    assert "running a new input shape, 1 x 416 x 320" in said
+    predictor.predict_samples(street, batch_size=2)
+    assert "running a new input shape" not in capsys.readouterr().err  # quiet without progress
