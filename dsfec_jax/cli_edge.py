@@ -124,12 +124,12 @@ def run_depth(args) -> int:
     from .modalities.image.depth import load_depth_predictor
     from .modalities.image.fit_depth import evaluate_dense
 
-    from tqdm import tqdm
+    from .core.progress import FIRST_BATCH, bar
 
     predictor = load_depth_predictor(args.weights or zoo.shipped_weights(DEPTH_MODEL))
     frames = StreetDataset(StreetConfig(), "test", args.seed, args.frames or 50)
-    # the first frame compiles the network: the bar says so by its rate, never silent (stderr)
-    scores = evaluate_dense(predictor, tqdm(frames, desc="depth eval (street test frames)", total=len(frames)))
+    scores = evaluate_dense(predictor, bar(frames, "depth eval (street test frames)", first=FIRST_BATCH,
+                                           total=len(frames)))
     print(json.dumps(scores, indent=1) if args.json else "  ".join(f"{k} {v:.4f}" for k, v in scores.items()))
     return 0
 
@@ -220,10 +220,13 @@ def run_edge_command(args) -> int:
             sys.exit(f"dsfec edge: {err}")
     from tqdm import tqdm
 
+    from .core.progress import quiet
+
     try:
         recording = {"device": args.device,
                      "source": str(Path(args.frames).resolve()) if args.frames else info["drive"]}
-        with tqdm(desc="edge frames placed", unit="frame") as bar:  # stderr; the first frame compiles
+        # stderr; the first frame compiles
+        with tqdm(desc="edge frames placed", unit="frame", disable=quiet()) as bar:
             summary = run_edge(frames, pipeline, args.out, uplink, info, truth_origin, recording=recording,
                                progress=lambda done, batch: bar.update(1))
     except ValueError as err:  # a batches.jsonl, run.json or queued file changed by hand; a bad depth file

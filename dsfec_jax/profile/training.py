@@ -48,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import zoo
-from ..core import atomic, host_memory, machine_load, progress
+from ..core import atomic, host_memory, machine_load, progress, spread
 from ..core.child_process import run_passing_stderr
 from ..core import threads as thread_control
 from ..core.defaults import RUN_PILLARS
@@ -263,8 +263,7 @@ def sgemm_rates(samples: dict) -> dict:
 
 
 def summary(ms: list[float]) -> dict:
-    return {"median": round(float(np.median(ms)), 3), "p10": round(float(np.percentile(ms, 10)), 3),
-            "p90": round(float(np.percentile(ms, 90)), 3), "n": len(ms)}
+    return {**spread.percentiles(ms), "n": len(ms)}
 
 
 def analytic_forward_gflops(detector, inputs: dict) -> float:
