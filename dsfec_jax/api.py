@@ -34,6 +34,16 @@ def load(model, /, weights: str | Path | None = None, predictor_options: dict | 
     return modality_of(cfg).predictor(detector, variables, **(predictor_options or {}))
 
 
+def tune_host() -> dict:
+    """The `dsfec` commands' host-memory settings for your own script (core/host_memory): XLA's
+    temporary buffers kept on the heap between calls (glibc's mallopt) and calls run inline. Call it
+    first, before anything runs JAX; it changes glibc's allocator for the whole process (the peak heap
+    is kept until exit). -> {'keep_buffers': bool, 'inline_dispatch': bool}, what applied."""
+    from .core.host_memory import tune_in_process
+
+    return tune_in_process()
+
+
 def read_files(model, *paths: str | Path, columns: str | None = None):
     """A user's own files as the model's inputs, ready for `predictor.predict_samples(items)` (ids: the
     paths): camera images, radar point clouds (.pcd, .bin with `columns` = vod | tj4d | names), RD

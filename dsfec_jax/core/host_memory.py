@@ -33,6 +33,12 @@ the test runner are never re-executed and keep the defaults. A tunable the user
 already gave stands (and where it is one of KEEP_BUFFERS, dispatch stays asynchronous).
 DSFEC_HUGEPAGES=0 leaves all of it at the defaults. Glibc >= 2.35 on Linux; huge pages only
 with THP not set to 'never'. jax is imported only to set its dispatch, before XLA starts.
+
+A library user's process (their own script, a notebook) is never re-executed. `tune_in_process`
+is its one-call opt-in, to call before anything runs JAX: glibc's `mallopt` sets the two
+KEEP_BUFFERS limits at run time (M_MMAP_MAX, M_TRIM_THRESHOLD; glibc has no run-time switch for
+huge pages, so only they are left to the relaunch) and async dispatch goes off as in a command.
+Called after XLA's CPU client has started, only the mallopt part can still apply; it says so.
 """
 
 from __future__ import annotations
@@ -149,13 +155,55 @@ def dispatch_inline() -> None:
     jax.config.update(ASYNC_DISPATCH, False)
 
 
+M_TRIM_THRESHOLD, M_MMAP_MAX = -1, -4  # glibc's malloc.h parameter numbers
+MALLOPT_TRIM_THRESHOLD = 2**31 - 1  # mallopt takes an int: the largest (2 GiB), above any step's buffer
+_kept_by_mallopt = False  # set once mallopt_keep_buffers succeeded (what the benchmarks record)
+
+
+def mallopt_keep_buffers() -> bool:
+    """KEEP_BUFFERS through glibc's mallopt in this running process: large blocks from the heap,
+    never trimmed. False where this is not glibc on Linux (nothing changed)."""
+    if platform.system() != "Linux" or glibc_version() is None:
+        return False
+    import ctypes
+
+    global _kept_by_mallopt
+    libc = ctypes.CDLL(None)  # the C library this interpreter already runs on
+    # mallopt returns 1 on success; both are plain integer settings every glibc accepts.
+    _kept_by_mallopt = bool(libc.mallopt(M_MMAP_MAX, 0)) and bool(libc.mallopt(M_TRIM_THRESHOLD, MALLOPT_TRIM_THRESHOLD))
+    return _kept_by_mallopt
+
+
+def tune_in_process() -> dict:
+    """The commands' host settings for a process that was not started as one (a library user's
+    script): `mallopt_keep_buffers`, then async dispatch off where XLA's CPU client has not started
+    yet (its pool threads do not exist). -> what applied: {'keep_buffers': bool, 'inline_dispatch':
+    bool}. DSFEC_HUGEPAGES=0 leaves everything at the defaults, as for the commands."""
+    from . import threads
+
+    if os.environ.get(OPT_OUT, "1") == "0":
+        return {"keep_buffers": False, "inline_dispatch": False}
+    kept = mallopt_keep_buffers()
+    inline = False
+    if kept and not threads.eigen_threads():
+        dispatch_inline()
+        inline = True
+    elif kept:
+        warnings.warn("dsfec_jax tune_in_process: XLA's CPU client has already started, so its calls stay "
+                      "asynchronous; call it before anything runs JAX to get the commands' speed")
+    return {"keep_buffers": kept, "inline_dispatch": inline}
+
+
 def active() -> bool:
     """Whether this process started with glibc's huge-page tunable on (recorded with benchmarks)."""
     return _tunables(os.environ.get("GLIBC_TUNABLES", "")).get(TUNABLE) == "1"
 
 
 def heap_keeps_buffers() -> bool:
-    """Whether this process started with glibc's KEEP_BUFFERS tunables."""
+    """Whether this process keeps large blocks on its heap: started with glibc's KEEP_BUFFERS
+    tunables, or set them at run time (`mallopt_keep_buffers`)."""
+    if _kept_by_mallopt:
+        return True
     tunables = _tunables(os.environ.get("GLIBC_TUNABLES", ""))
     return all(tunables.get(k) == v for k, v in KEEP_BUFFERS.items())
 

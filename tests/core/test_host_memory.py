@@ -219,3 +219,48 @@ def test_the_map_service_process_starts_light(tmp_path):
         for proc, _, _ in started.values():
             proc.terminate()
             proc.wait(30)
+
+
+MALLINFO_PROBE = """
+import ctypes, json, os, sys
+class Mallinfo2(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")]
+libc = ctypes.CDLL(None)
+libc.mallinfo2.restype = Mallinfo2
+libc.malloc.restype = ctypes.c_void_p
+from dsfec_jax import api
+if sys.argv[1] == "after_jax":
+    import jax.numpy as jnp
+    (jnp.ones(4) + 1).block_until_ready()
+applied = api.tune_host() if sys.argv[1] != "untuned" else {}
+before = libc.mallinfo2().hblkhd
+block = libc.malloc(256 << 20)  # an XLA-sized temporary: glibc's default serves it with mmap
+mapped = libc.mallinfo2().hblkhd - before
+libc.free(ctypes.c_void_p(block))
+import jax
+print(json.dumps({"applied": applied, "mmapped_bytes": mapped, "async": jax.config.read("jax_cpu_enable_async_dispatch"),
+                  "heap_keeps": __import__("dsfec_jax.core.host_memory", fromlist=["x"]).heap_keeps_buffers()}))
+"""
+
+
+def _tune_probe(mode: str) -> dict:
+    import json
+
+    env = {k: v for k, v in os.environ.items() if k not in ("GLIBC_TUNABLES", hm.OPT_OUT)}
+    done = subprocess.run([sys.executable, "-c", MALLINFO_PROBE, mode], env=env, capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(hm.glibc_version() is None, reason="mallopt is glibc's")
+def test_a_library_process_gets_the_commands_host_settings_in_one_call():
+    """api.tune_host keeps large blocks on the heap (no mmap) and turns async dispatch off, without a
+    restart; after JAX has started, only the heap part can apply."""
+    untuned, tuned, late = (_tune_probe(mode) for mode in ("untuned", "first", "after_jax"))
+    assert untuned["mmapped_bytes"] >= 256 << 20 and untuned["async"] and not untuned["heap_keeps"]
+    assert tuned["applied"] == {"keep_buffers": True, "inline_dispatch": True}
+    assert tuned["mmapped_bytes"] == 0 and tuned["async"] is False and tuned["heap_keeps"]
+    assert late["applied"] == {"keep_buffers": True, "inline_dispatch": False}
+    assert late["mmapped_bytes"] == 0 and late["async"] is True
