@@ -209,8 +209,8 @@ def load_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:
     target = model.variable_shapes()
     loaded = checkpoint.load(path, {**{k: target[k] for k in model.collections},
                                     **{k: v for k, v in raw.items() if k not in model.collections}})
-    # on the device once: a jitted call converts every numpy argument again on every call (~20 us an
-    # array; YOLOv8n's end-to-end 5.94 -> 4.13 ms)
+    # on the device once: a jitted call converts every numpy argument again on every call (the cost:
+    # docs/range-doppler.md, Deploy)
     return {**loaded, **jax.device_put({k: loaded[k] for k in model.collections})}
 
 

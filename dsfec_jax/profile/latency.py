@@ -35,7 +35,7 @@ def timing_variables(detector, seed: int = 0) -> dict:
 
     shapes = jax.eval_shape(detector.init, jax.random.key(seed))
     # on the device, as a predictor holds them: numpy weights would be converted again on every
-    # timed call (~20 us an array), which the predictors no longer pay
+    # timed call, which the predictors no longer pay
     return jax.device_put(jax.tree_util.tree_map_with_path(fill, shapes))
 
 
