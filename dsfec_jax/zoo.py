@@ -198,8 +198,8 @@ def shipped_weights(name: str) -> Path:
 
 def load_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:
     """The model's collections ({'params', 'batch_stats'} for a detector, {'params'} for the depth
-    network) from a weights file or a training checkpoint, shape-checked; a checkpoint's other
-    entries (optimizer state, step) come back as stored."""
+    network) from a weights file or a training checkpoint, shape-checked and on the device (jax
+    arrays); a checkpoint's other entries (optimizer state, step) come back as stored."""
     from .core import checkpoint
 
     raw = checkpoint.load(path)
@@ -207,8 +207,11 @@ def load_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:
     if missing:
         raise ValueError(f"{path}: expected a variables tree with {missing}; found keys {sorted(raw)}")
     target = model.variable_shapes()
-    return checkpoint.load(path, {**{k: target[k] for k in model.collections},
-                                  **{k: v for k, v in raw.items() if k not in model.collections}})
+    loaded = checkpoint.load(path, {**{k: target[k] for k in model.collections},
+                                    **{k: v for k, v in raw.items() if k not in model.collections}})
+    # on the device once: a jitted call converts every numpy argument again on every call (the cost:
+    # docs/range-doppler.md, Deploy)
+    return {**loaded, **jax.device_put({k: loaded[k] for k in model.collections})}
 
 
 def model_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:

@@ -34,7 +34,9 @@ def timing_variables(detector, seed: int = 0) -> dict:
         return (rng.standard_normal(leaf.shape) * fan_in**-0.5).astype(leaf.dtype)
 
     shapes = jax.eval_shape(detector.init, jax.random.key(seed))
-    return jax.tree_util.tree_map_with_path(fill, shapes)
+    # on the device, as a predictor holds them: numpy weights would be converted again on every
+    # timed call, which the predictors no longer pay
+    return jax.device_put(jax.tree_util.tree_map_with_path(fill, shapes))
 
 
 def stage_functions(detector, variables, inputs, stages: Callable[..., dict] | None = None) -> dict:

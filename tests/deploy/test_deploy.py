@@ -249,8 +249,8 @@ def test_bench_times_every_stage_per_runtime_and_writes_reports(tmp_path, capsys
         assert said in captured.err, captured.err[-2000:]
     assert [(r["model"], r["runtime"], r["threads"]) for r in records] == [("dsfec_s", "jax", 1), ("dsfec_s", "onnx", 1)]
     for r in records:
-        assert set(r["stages_ms"]) == {"pillarize", "network", "decode", "nms"}
-        assert r["total_ms"] >= r["stages_ms"]["network"] > 0 and r["cpu"] and r["versions"]["onnxruntime"]
+        assert list(r["stages_ms"]) == ["pillarize", "network_decode", "nms"]  # the predictors' own stages
+        assert r["total_ms"] >= r["stages_ms"]["network_decode"] > 0 and r["cpu"] and r["versions"]["onnxruntime"]
     assert set(records[0]["throughput_fps"]) == set(records[0]["throughput_fps_p10_p90"]) == {"1", "2", "4", "8"}
     assert "JAX / ONNX Runtime (dsfec_s, 1 thread)" in (tmp_path / "bench.md").read_text()
     assert records[0]["machine"]["text"].startswith(("busy: ", "idle: "))

@@ -1,7 +1,8 @@
 """What every modality's benchmark stages share: the runtimes (jax, onnx, onnx-int8), an export
 written once per worker and shared by its runtimes (`cached_export`), and JAX's throughput of
 network + decode at batch sizes above 1, which the batch-1 chains do not show (`jax_throughput`).
-Each modality's stages are its own (modalities/<m>/bench.py).
+Each modality's stages are its predictors' own (`stages(items)`, modalities/stages.py; the chains:
+modalities/<m>/bench.py).
 """
 
 from __future__ import annotations
@@ -34,8 +35,7 @@ def cached_export(workdir: Path, tag: str, export, quantize, int8: bool) -> Path
 
 
 def jax_throughput(det, variables, fn, repeats: int, hw: tuple[int, int] | None = None) -> dict:
-    """Frames/s of the jitted fn(variables, inputs) (network + decode; + NMS for an RD model, whose
-    predictor compiles it) at each batch size (batch 1 .. 8) -> the record fields 'throughput_fps'
+    """Frames/s of the jitted fn(variables, inputs) (the JAX predictor's network + decode) at each batch size (batch 1 .. 8) -> the record fields 'throughput_fps'
     ({batch: fps at the median time}) and 'throughput_fps_p10_p90' ({batch: [fps at the 90th
     percentile time, at the 10th]}: the spread over the repeats). `hw`: the input size of the
     models whose dummy inputs take one (camera images: the bench's letterboxed size)."""

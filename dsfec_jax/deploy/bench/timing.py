@@ -1,11 +1,12 @@
 """Interleaved timing of the chains, raw input to boxes, one call per stage.
 
-A chain is [(stage, fn(previous output) -> output)]; each modality builds its own
-(modalities/<m>/bench.py: points pillarize, network, decode, nms; range-Doppler maps
-representation, network_decode, nms; camera images letterbox, network_decode, nms). Every runtime
-runs the same chain on the same frame; within each repeat the models and runtimes alternate
-(A B C A B C ...) rather than running one after the other, so a slow spell of a noisy shared
-machine hits them all alike and their ratios hold.
+A chain is [(stage, fn(previous output) -> output)]: a predictor's own path from raw input to
+detections, `predictor.stages(items)` (modalities/stages.py), so the bench times what users run
+(modalities/<m>/bench.py: points pillarize, network_decode, nms; range-Doppler maps
+representation, network_decode, nms, to_map; camera images letterbox, network_decode, nms,
+to_image). Every runtime runs its predictor's chain on the same frame; within each repeat the
+models and runtimes alternate (A B C A B C ...) rather than running one after the other, so a slow
+spell of a noisy shared machine hits them all alike and their ratios hold.
 """
 
 from __future__ import annotations

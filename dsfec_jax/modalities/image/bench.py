@@ -1,16 +1,13 @@
-"""The benchmark chains of a camera model (Shuffle-YOLOv3, Darknet53-YOLOv3; `dsfec bench`):
-letterbox (host: the image scaled and centred into the network input), network_decode (network
-and YOLOv3 decode), nms (darknet's host post-processing and the boxes mapped back to the image).
+"""The benchmark chains of a camera model (Shuffle-YOLOv3, Darknet53-YOLOv3; `dsfec bench`): each
+runtime's chain IS its predictor's path, `CameraPipeline.stages` (modalities/image/predict.py,
+STAGES): letterbox (host: the image scaled and centred into the network input), network_decode
+(network and YOLOv3 decode), nms (darknet's host post-processing, models/camera/decode.detections),
+to_image (the boxes mapped back to the image's pixels and renamed by the class map).
 
-The network + decode stage of each runtime is run through the pipelines that also letterbox and
-post-process (modalities/image/predict.CameraPipeline), so every
-runtime's chain shares the host stages and differs by the network alone.
-
-jax: CameraPredictor (the jitted network and YOLOv3 decode). onnx / onnx-int8: the export's graph
-(export_camera: network + decode; int8 quantizes the convolutions only, calibrated on letterboxed
-street train images) in ONNX Runtime with intra_op_num_threads = the worker's thread count, through
-OrtCameraPredictor. Both then run darknet's host NMS (models/camera/decode.detections), as the JAX
-predictor always does: the camera family has no compiled NMS to time.
+jax: CameraPredictor (the jitted network and YOLOv3 decode). onnx / onnx-int8: OrtCameraPredictor
+over the export's graph (export_camera: network + decode; int8 quantizes the convolutions only,
+calibrated on letterboxed street train images) with intra_op_num_threads = the worker's thread
+count. The camera family has no compiled NMS: both run darknet's host NMS.
 
 Without shipped weights the output biases start at ultralytics' priors (models/camera/config.py
 `prior_bias`), but the initial batch-norm statistics (mean 0, variance 1) let activations grow
@@ -23,13 +20,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import jax
 import numpy as np
 
 from ...deploy.bench.model_setup import bench_variables
 from ...deploy.bench.stages import cached_export, jax_throughput
+from .predict import STAGES
 
-STAGES = ("letterbox", "network_decode", "nms")
+__all__ = ["STAGES", "camera_chains", "measured_batch_stats"]
+
 CALIBRATION_IMAGES = 32  # street train images, seed 0, as the RD bench's 32 samples
 
 
@@ -89,21 +87,6 @@ def camera_model_setup(name: str, size: int, overrides: dict | None = None):
     return det, variables, label, load_camera_images("street", "test", 1, seed=0)[0]
 
 
-def camera_chain(image, pipeline) -> list:
-    """[(stage, fn(previous output) -> output)] from a CameraImage to its Boxes2D in image pixels,
-    through a modalities/image/predict.CameraPipeline (the JAX predictor or the ONNX Runtime one)."""
-    from ...data.camera.letterbox import letterbox
-
-    input_hw = pipeline.input_hw(image.hw)
-    affine = letterbox(image.hw, input_hw)  # the map the letterbox stage applies (eval_input's)
-
-    def nms(out):
-        return pipeline.in_image(pipeline.postprocess(*out)[0], affine, image.hw)
-
-    return [("letterbox", lambda _: pipeline.letterboxed([image], input_hw)[0]),
-            ("network_decode", pipeline.decoded), ("nms", nms)]
-
-
 CAMERA_SIZE = 416  # the long side camera images are letterboxed to (the paper's; street frames: 256 x 416)
 
 
@@ -112,16 +95,17 @@ def camera_chains(name: str, runtimes: list[str], threads: int, workdir: Path, r
     """runtime -> (chain of a camera model, record fields): one street test image letterboxed as
     CameraPredictor letterboxes it at `size`, into one fixed-size graph for ONNX Runtime.
     `overrides`: config fields (the tests' tiny networks)."""
-    from .predict import decoding_network, letterbox_shape
+    from .predict import letterbox_shape
 
     det, variables, label, image = camera_model_setup(name, size, overrides)
     input_hw = letterbox_shape(size, True, image.hw)  # CameraPredictor's rectangle: 256 x 416 at 416
-    out = {}
+    out, pipelines = {}, {}
     for rt in runtimes:
-        pipeline = camera_pipeline(det, variables, rt, size, workdir, threads, input_hw)
-        out[rt] = (camera_chain(image, pipeline), {"weights": label, "input_hw": list(input_hw)})
-    if "jax" in out:
-        network = decoding_network(det)
-        out["jax"][1].update(jax_throughput(det, variables, jax.jit(lambda v, x: network(v, x["image"])),
+        pipelines[rt] = camera_pipeline(det, variables, rt, size, workdir, threads, input_hw)
+        out[rt] = (pipelines[rt].stages([image], pipelines[rt].input_hw(image.hw)),
+                   {"weights": label, "input_hw": list(input_hw)})
+    if "jax" in out:  # the predictor's own jitted network and decode at batch 1 .. 8
+        jax_pipeline = pipelines["jax"]
+        out["jax"][1].update(jax_throughput(det, jax_pipeline.variables, lambda v, x: jax_pipeline.network(v, x["image"]),
                                             repeats, hw=input_hw))
     return out

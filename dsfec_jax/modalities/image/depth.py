@@ -81,7 +81,8 @@ class MonodepthPredictor:
 
     def __init__(self, config: MonodepthConfig, variables: dict, post_process: bool = True):
         self.config, self.post_process = config, post_process
-        self.variables = {"params": variables["params"]}
+        # on the device once (numpy weights are converted again on every jitted call)
+        self.variables = jax.device_put({"params": variables["params"]})
         self._disparity = jitted_disparity(config, post_process)
 
     def network_input(self, image: np.ndarray) -> np.ndarray:

@@ -22,6 +22,7 @@ import jax
 import numpy as np
 
 from ..checks import require_modality
+from ..stages import Stages, carrying, run as run_stages
 from ...core.progress import FIRST_BATCH, bar, stage
 from ...boxes.boxes2d import Boxes2D
 from ...data.camera.batches import eval_input
@@ -44,6 +45,9 @@ def letterbox_shape(size: int, rect: bool, image_hw) -> tuple[int, int]:
 def as_camera_image(image) -> CameraImage:
     """A CameraImage as it is, or (H, W, 3) uint8 RGB wrapped as one (id 'image', no boxes)."""
     return image if isinstance(image, CameraImage) else CameraImage("image", np.asarray(image), Boxes2D.empty())
+
+
+STAGES = ("letterbox", "network_decode", "nms", "to_image")  # the predictor's path (`CameraPipeline.stages`)
 
 
 class CameraPipeline:
@@ -98,17 +102,25 @@ class CameraPipeline:
             for item in chunk:
                 groups.setdefault(self.input_hw(item.hw), []).append(item)
             for hw, members in groups.items():
-                batch, affines = self.letterboxed(members, hw)
                 # photos of other aspect ratios letterbox to other shapes: each new one compiles again,
                 # for longer than the bar's refresh on a busy machine (the first batch has its own line)
-                new = bool(shapes) and batch.shape not in shapes
-                shapes.add(batch.shape)
+                new = bool(shapes) and (len(members), hw) not in shapes
+                shapes.add((len(members), hw))
                 with stage(f"running a new input shape, {len(members)} x {hw[0]} x {hw[1]} (a JAX predictor compiles "
                            f"for it)", enabled=progress and new):
-                    decoded = self.decoded(batch)
-                for item, affine, dets in zip(members, affines, self.postprocess(*decoded)):
-                    out[item.image_id] = self.in_image(dets, affine, item.hw)
+                    found = run_stages(self.stages(members, hw))
+                out.update(zip((item.image_id for item in members), found))
         return out
+
+    def stages(self, images: Sequence[CameraImage], input_hw) -> Stages:
+        """Images of one input shape -> their Boxes2D in image pixels, stage by stage (STAGES): what
+        predict_samples runs and `dsfec bench` times."""
+        def to_image(pair):
+            found, affines = pair
+            return [self.in_image(dets, affine, item.hw) for item, affine, dets in zip(images, affines, found)]
+
+        return [("letterbox", lambda _: self.letterboxed(images, input_hw)), ("network_decode", carrying(self.decoded)),
+                ("nms", carrying(lambda out: self.postprocess(*out))), ("to_image", to_image)]
 
     def in_image(self, dets: Boxes2D, affine: Affine, image_hw) -> Boxes2D:
         """Input-pixel detections -> the image's pixels (clipped), renamed by the class map."""
@@ -125,7 +137,8 @@ class CameraPredictor(CameraPipeline):
                  score_threshold: float = EVAL_SCORE, nms_iou: float = NMS_IOU,
                  max_detections: int = MAX_DETECTIONS, class_map: Mapping[str, str] | None = None):
         require_modality(detector.config, "image", "CameraPredictor")
-        self.detector, self.variables = detector, variables
+        # on the device once (numpy weights are converted again on every jitted call)
+        self.detector, self.variables = detector, jax.device_put(variables)
         self._setup(detector.name, detector.config.classes, size, rect, score_threshold, nms_iou, max_detections,
                     class_map)
         self.network = jax.jit(decoding_network(detector))

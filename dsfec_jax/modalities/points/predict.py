@@ -15,6 +15,7 @@ from ...boxes.structures import Boxes
 from ...data.points.frame import Frame
 from ...core.progress import FIRST_BATCH, bar
 from ...data.points.pillarize import PillarSpec, pillarize, select_columns
+from ..stages import Stages, carrying, run as run_stages
 
 
 def head_classes(cfg) -> dict:
@@ -37,6 +38,9 @@ def decoded_network(detector, top_k: int):
 class Detections(NamedTuple):
     boxes: Boxes
     scores: np.ndarray
+
+
+STAGES = ("pillarize", "network_decode", "nms")  # the predictor's path (`HostPipeline.stages`)
 
 
 class HostPipeline:
@@ -69,15 +73,26 @@ class HostPipeline:
 
     def _detect(self, items: list) -> list[Detections]:
         """Detections of one batch of point arrays or Frames, in order."""
-        arrays = [select_columns(p, self.spec.features) if isinstance(p, Frame) else np.asarray(p, np.float32)
-                  for p in items]
-        tensors = [pillarize(a, self.spec)[0] for a in arrays]
-        batch = {k: np.stack([t[k] for t in tensors]) for k in tensors[0]}
-        # A frame with no point on the grid sensed nothing, so it reports nothing: the network
-        # would still answer from its biases and from the zero padding at the grid's edge
-        # (shipped DSFEC-S: 59 low-score edge "cars" on an empty cloud).
-        return [det if t["mask"].any() else self._postprocess(*self._nothing())
-                for det, t in zip(self.predict_tensors(batch), tensors)]
+        return run_stages(self.stages(items))
+
+    def stages(self, items: Sequence) -> Stages:
+        """Point arrays or Frames -> their Detections, stage by stage (STAGES): what the predictor
+        runs and `dsfec bench` times."""
+        def pillarized(_):
+            arrays = [select_columns(p, self.spec.features) if isinstance(p, Frame) else np.asarray(p, np.float32)
+                      for p in items]
+            tensors = [pillarize(a, self.spec)[0] for a in arrays]
+            return {k: np.stack([t[k] for t in tensors]) for k in tensors[0]}, [bool(t["mask"].any()) for t in tensors]
+
+        def nms(pair):
+            (boxes, scores, labels), sensed = pair
+            # A frame with no point on the grid sensed nothing, so it reports nothing: the network
+            # would still answer from its biases and from the zero padding at the grid's edge
+            # (shipped DSFEC-S: 59 low-score edge "cars" on an empty cloud).
+            return [self._postprocess(*(out if any_point else self._nothing()))
+                    for any_point, out in zip(sensed, zip(boxes, scores, labels))]
+
+        return [("pillarize", pillarized), ("network_decode", carrying(self.run)), ("nms", nms)]
 
     def predict_tensors(self, batch: dict) -> list[Detections]:
         """Detections of a batch of pillar tensors, exactly as the network and NMS give them."""
@@ -121,7 +136,8 @@ class Predictor(HostPipeline):
         cfg = detector.config
         given = {"top_k": top_k, "nms_iou": nms_iou, "max_boxes": max_boxes}
         options = {**zoo.family_of(cfg).points.predictor, **{k: v for k, v in given.items() if v is not None}}
-        self.detector, self.variables = detector, variables
+        # on the device once (numpy weights are converted again on every jitted call)
+        self.detector, self.variables = detector, jax.device_put(variables)
         self._setup(PillarSpec.of(cfg), head_classes(cfg), score_threshold, options["nms_iou"], options["max_boxes"])
         self.network = jax.jit(decoded_network(detector, options["top_k"]))
 

@@ -2,8 +2,9 @@
 interface of the JAX `RDPredictor` (modalities/rd/predict.RDPipeline: the same representations on the host and
 the same conversion back to map pixels).
 
-The graph gives each anchor's decoded box and class scores; `host_detections` then does on the host
-what the JAX predictor compiles: class-aware greedy NMS over the multi-label (anchor, class)
+The graph gives each anchor's decoded box and class scores; the pipeline's `postprocess`
+(models/yolo_rd/decode_host.host_detections), the JAX predictor's own, then runs on the host:
+class-aware greedy NMS over the multi-label (anchor, class)
 candidates (boxes/nms2d.detect_host, which keeps what the compiled nms2d.detect_jax keeps), or, for
 YOLOv10, the NMS-free top-k of models/yolo_rd/decode_v10.top_detections. Outputs are padded to
 max_detections as the compiled ones are.
@@ -16,7 +17,6 @@ from pathlib import Path
 import numpy as np
 
 from ...models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET
-from ...models.yolo_rd.decode_host import host_detections
 from .predict import RDPipeline
 from .export import OUTPUTS, representation_of
 from ...deploy.ort import ort_session, read_manifest, run_fixed_batch
@@ -42,12 +42,6 @@ class OrtRDPredictor(RDPipeline):
         feeds = {k: np.asarray(inputs[k], np.float32) for k in self.input_names}
         check_input_size(self.manifest, feeds, self.model_path)
         return run_fixed_batch(lambda f: self.session.run(list(OUTPUTS), f), feeds, self.batch_size, self.model_path)
-
-    def postprocess(self, boxes, class_scores) -> tuple[np.ndarray, ...]:
-        return host_detections(boxes, class_scores, self.kind, self.nms_iou, self.score_threshold, self.max_detections)
-
-    def run(self, inputs: dict):
-        return self.postprocess(*self.decoded(inputs))
 
 
 def check_input_size(manifest: dict, feeds: dict, where) -> None:

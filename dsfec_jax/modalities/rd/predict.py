@@ -14,10 +14,11 @@ import jax
 import numpy as np
 
 from ..checks import require_modality
+from ..stages import Stages, carrying, run as run_stages
 from ...core.progress import FIRST_BATCH, bar
 from ...boxes.boxes2d import Boxes2D
 from ...data.rd.batches import boxes_to_map, rd_eval_inputs
-from ...data.rd.representations import RDRepresentation
+from ...data.rd.representations import RDRepresentation, fitted_shape
 from ...data.rd.sample import RDSample
 from ...models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET, decode, detect
 from ...models.yolo_rd.decode_host import NMS, TOP_K, host_detections
@@ -43,20 +44,56 @@ def detecting_network(detector, iou_threshold: float = EVAL_IOU, score_threshold
     return run
 
 
+STAGES = ("representation", "network_decode", "nms", "to_map")  # the predictor's path (`RDPipeline.stages`)
+
+
 class RDPipeline:
-    """What every runtime shares: representations on the host, the runtime's `run(inputs)` (network +
-    decode + NMS), then boxes back to map pixels with class names. A subclass sets `classes`,
-    `representation`, `input_names` and `run`."""
+    """What every runtime shares: representations on the host, the runtime's `decoded(inputs)`
+    (network + decode), the host post-processing (class-aware NMS, or YOLOv10's top-k), then boxes
+    back to map pixels with class names. A subclass sets `classes`, `representation`,
+    `input_names`, `kind`, the thresholds and `decoded`."""
 
     classes: tuple[str, ...]
     representation: RDRepresentation
     input_names: tuple[str, ...]
+    kind: str
+    score_threshold: float
+    nms_iou: float
+    max_detections: int
+    nms_on_host = True  # False: `decoded` already ran the post-processing (RDPredictor's compiled one)
+
+    def decoded(self, inputs: dict) -> tuple[np.ndarray, ...]:
+        """Fitted maps -> (boxes (B, A, 4) xyxy input pixels, class scores (B, A, nc)) as numpy."""
+        raise NotImplementedError
+
+    def postprocess(self, boxes, class_scores) -> tuple[np.ndarray, ...]:
+        """Host post-processing (models/yolo_rd/decode_host) -> padded (boxes, scores, labels, valid)."""
+        return host_detections(boxes, class_scores, self.kind, self.nms_iou, self.score_threshold, self.max_detections)
 
     def run(self, inputs: dict) -> tuple[np.ndarray, ...]:
-        raise NotImplementedError
+        """Network + decode + NMS of fitted maps -> padded (boxes, scores, labels, valid)."""
+        out = self.decoded(inputs)
+        return self.postprocess(*out) if self.nms_on_host else out
 
     def __call__(self, sample: RDSample) -> Boxes2D:
         return self.predict_samples([sample])[sample.sample_id]
+
+    def stages(self, samples: Sequence[RDSample]) -> Stages:
+        """Samples of one fitted size -> their Boxes2D in map pixels, stage by stage (STAGES; with a
+        compiled NMS 'network_decode_nms' in place of network_decode and nms): what predict_samples
+        runs and `dsfec bench` times."""
+        def represent(_):
+            arrays = [rd_eval_inputs(s, self.representation, self.classes) for s in samples]
+            return {k: np.concatenate([a[k] for a in arrays]) for k in self.input_names}, arrays
+
+        def to_map(pair):
+            (boxes, scores, labels, valid), arrays = pair
+            return [self._boxes(boxes[j], scores[j], labels[j], valid[j], a) for j, a in enumerate(arrays)]
+
+        if not self.nms_on_host:
+            return [("representation", represent), ("network_decode_nms", carrying(self.decoded)), ("to_map", to_map)]
+        return [("representation", represent), ("network_decode", carrying(self.decoded)),
+                ("nms", carrying(lambda out: self.postprocess(*out))), ("to_map", to_map)]
 
     def predict_samples(self, samples: Sequence[RDSample], batch_size: int = 8,
                         progress: bool = False) -> dict[str, Boxes2D]:
@@ -66,27 +103,22 @@ class RDPipeline:
         samples = [samples[i] for i in range(len(samples))]
         for start in bar(range(0, len(samples), batch_size), f"detecting in {len(samples)} maps", first=FIRST_BATCH,
                          enabled=progress, unit="batch"):
-            chunk = [rd_eval_inputs(s, self.representation, self.classes) for s in samples[start:start + batch_size]]
-            for group in _same_size(chunk):
-                inputs = {k: np.concatenate([chunk[i][k] for i in group]) for k in self.input_names}
-                boxes, scores, labels, valid = (np.asarray(a) for a in self.run(inputs))
-                for j, i in enumerate(group):
-                    sid = samples[start + i].sample_id
-                    out[sid] = self._boxes(boxes[j], scores[j], labels[j], valid[j], chunk[i])
+            for group in _same_size(samples[start:start + batch_size], self.representation):
+                out.update(zip((s.sample_id for s in group), run_stages(self.stages(group))))
         return out
 
     def _boxes(self, boxes, scores, labels, valid, arrays: dict) -> Boxes2D:
-        keep = np.flatnonzero(valid)
-        xyxy = boxes_to_map(boxes[keep], arrays["to_map_scale"], arrays["map_hw"])
-        names = np.array([self.classes[int(c)] for c in labels[keep]], dtype="<U16")
-        return Boxes2D(xyxy.astype(np.float32), names, scores[keep].astype(np.float32))
+        keep = np.flatnonzero(np.asarray(valid))
+        xyxy = boxes_to_map(np.asarray(boxes)[keep], arrays["to_map_scale"], arrays["map_hw"])
+        names = np.array([self.classes[int(c)] for c in np.asarray(labels)[keep]], dtype="<U16")
+        return Boxes2D(xyxy.astype(np.float32), names, np.asarray(scores)[keep].astype(np.float32))
 
 
-def _same_size(chunk: list[dict]) -> list[list[int]]:
-    """Indices of the chunk grouped by fitted input size (a batch needs one size)."""
-    groups: dict[tuple, list[int]] = {}
-    for i, arrays in enumerate(chunk):
-        groups.setdefault(arrays["heat"].shape[1:3], []).append(i)
+def _same_size(samples: list[RDSample], representation: RDRepresentation) -> list[list[RDSample]]:
+    """The samples grouped by fitted input size (a batch needs one size), in first-seen order."""
+    groups: dict[tuple, list[RDSample]] = {}
+    for s in samples:
+        groups.setdefault(fitted_shape(s.shape, representation), []).append(s)
     return list(groups.values())
 
 
@@ -108,20 +140,18 @@ class RDPredictor(RDPipeline):
         require_modality(detector.config, "rd", "RDPredictor")
         if postprocess not in ("host", "compiled"):
             raise ValueError(f"RDPredictor postprocess={postprocess!r}; expected 'host' or 'compiled'")
-        self.detector, self.variables = detector, variables
+        # on the device once (numpy weights are converted again on every jitted call)
+        self.detector, self.variables = detector, jax.device_put(variables)
         self.classes, self.representation = tuple(detector.config.classes), representation
         self.input_names = detector.config.input_names
         self.score_threshold, self.nms_iou, self.max_detections = score_threshold, nms_iou, max_detections
-        self.postprocess = postprocess
+        self.nms_on_host = postprocess == "host"
         self.kind = TOP_K if detector.config.arch == "v10" else NMS  # YOLOv10 runs NMS-free
         if postprocess == "compiled":
             self.network = jax.jit(detecting_network(detector, nms_iou, score_threshold, max_detections))
         else:
             self.network = jax.jit(decoding_network(detector))
 
-    def run(self, inputs: dict):
-        out = jax.device_get(self.network(self.variables, inputs))
-        if self.postprocess == "compiled":
-            return out
-        boxes, scores = (np.asarray(a) for a in out)
-        return host_detections(boxes, scores, self.kind, self.nms_iou, self.score_threshold, self.max_detections)
+    def decoded(self, inputs: dict):
+        """The jitted network and decode (with `postprocess="compiled"` also the NMS), as numpy."""
+        return tuple(np.asarray(a) for a in jax.device_get(self.network(self.variables, inputs)))

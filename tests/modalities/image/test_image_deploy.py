@@ -161,8 +161,9 @@ def test_int8_is_close_to_float_with_the_decode_in_float(exports, frames, tmp_pa
 
 
 def test_the_bench_chains_run_and_agree(tmp_path, monkeypatch):
-    """jax, onnx and onnx-int8 chains of one street image: the three stages each, the same
-    detections from JAX and ONNX Runtime; the stand-in variables carry measured batch statistics."""
+    """jax, onnx and onnx-int8 chains of one street image: each its predictor's own stages, the same
+    detections from JAX and ONNX Runtime as from CameraPredictor; the stand-in variables carry
+    measured batch statistics."""
     from dsfec_jax.deploy.bench import stages
     from dsfec_jax.modalities.image import bench as stages_camera
 
@@ -175,12 +176,12 @@ def test_the_bench_chains_run_and_agree(tmp_path, monkeypatch):
     assert set(chains) == {"jax", "onnx", "onnx-int8"}
     outputs = {}
     for rt, (steps, fields) in chains.items():
-        assert [s for s, _ in steps] == list(stages_camera.STAGES)
+        assert [s for s, _ in steps] == list(stages_camera.STAGES) == ["letterbox", "network_decode", "nms", "to_image"]
         assert fields["weights"] == "random" and fields["input_hw"] == list(HW)
         x = None
         for _, fn in steps:
             x = fn(x)
-        outputs[rt] = x
+        outputs[rt], = x  # one image's Boxes2D
     assert set(chains["jax"][1]["throughput_fps"]) == {"1"}
     assert len(outputs["jax"]) > 0
     assert_same_detections(outputs["onnx"], outputs["jax"])

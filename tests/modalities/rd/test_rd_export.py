@@ -16,11 +16,12 @@ from dsfec_jax.data.rd.sources import load_rd_samples
 from dsfec_jax.modalities.rd.ort import OrtRDPredictor
 from dsfec_jax.modalities.rd.export import export_rd
 from dsfec_jax.modalities.rd.quantize import quantize_rd
-from dsfec_jax.modalities.rd.bench import compiled_postprocess
 from dsfec_jax.modalities.rd.export import decoded_network
 from dsfec_jax.models.yolo_rd.decode_host import NMS, TOP_K, host_detections
 from dsfec_jax.modalities.rd.ort import check_input_size
-from dsfec_jax.models.yolo_rd.decode import EVAL_CONF, EVAL_IOU
+from dsfec_jax.boxes.nms2d import detect_jax
+from dsfec_jax.models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET
+from dsfec_jax.models.yolo_rd.decode_v10 import top_detections
 from dsfec_jax.modalities.rd.predict import RDPredictor
 
 HW = (64, 32)
@@ -29,6 +30,19 @@ MAX_DET = 50
 # YOLOv10n exports as cheaply but adds ~8 s of export and compile: its host top-k is checked below
 # against the compiled one on synthetic arrays, and its ONNX parity by the command in the report
 MODELS = ("yolov8n", "yolov8n_adapter")
+
+
+@functools.cache
+def compiled_postprocess(kind: str):
+    """jit(vmap(one image's compiled post-processing)) at the evaluation settings: what decode.detect
+    and decode_v10.detect_nms_free run after their decode (the reference of the host one)."""
+    if kind == TOP_K:
+        def one(boxes, scores):
+            return top_detections(boxes, scores, EVAL_CONF, EVAL_MAX_DET)
+    else:
+        def one(boxes, scores):
+            return detect_jax(boxes, scores, EVAL_IOU, EVAL_CONF, max_detections=EVAL_MAX_DET, multi_label=True)
+    return jax.jit(jax.vmap(one))
 
 
 @pytest.fixture(scope="module")
