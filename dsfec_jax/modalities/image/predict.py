@@ -22,6 +22,7 @@ import jax
 import numpy as np
 
 from ..checks import require_modality
+from ..inference import InferenceVariables
 from ...core.progress import FIRST_BATCH, bar, stage
 from ...boxes.boxes2d import Boxes2D
 from ...data.camera.batches import eval_input
@@ -118,18 +119,19 @@ class CameraPipeline:
         return dataclasses.replace(dets.select(keep), xyxy=xyxy[keep], names=names)
 
 
-class CameraPredictor(CameraPipeline):
+class CameraPredictor(InferenceVariables, CameraPipeline):
     """`predictor(image) -> Boxes2D` (original image pixels, scores) with the jitted JAX network."""
 
     def __init__(self, detector, variables, size: int = 416, rect: bool = True,
                  score_threshold: float = EVAL_SCORE, nms_iou: float = NMS_IOU,
                  max_detections: int = MAX_DETECTIONS, class_map: Mapping[str, str] | None = None):
         require_modality(detector.config, "image", "CameraPredictor")
-        self.detector, self.variables = detector, variables
+        self.detector, network_detector = detector, self._inference_detector(detector)
+        self.variables = variables
         self._setup(detector.name, detector.config.classes, size, rect, score_threshold, nms_iou, max_detections,
                     class_map)
-        self.network = jax.jit(decoding_network(detector))
+        self.network = jax.jit(decoding_network(network_detector))
 
     def decoded(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        boxes, scores = jax.device_get(self.network(self.variables, images))
+        boxes, scores = jax.device_get(self.network(self.inference_variables, images))
         return np.asarray(boxes), np.asarray(scores)

@@ -15,6 +15,7 @@ from ...boxes.structures import Boxes
 from ...data.points.frame import Frame
 from ...core.progress import FIRST_BATCH, bar
 from ...data.points.pillarize import PillarSpec, pillarize, select_columns
+from ..inference import InferenceVariables
 
 
 def head_classes(cfg) -> dict:
@@ -109,7 +110,7 @@ class HostPipeline:
         return Detections(out, scores.astype(np.float32))
 
 
-class Predictor(HostPipeline):
+class Predictor(InferenceVariables, HostPipeline):
     """`predictor(points_NxF | Frame) -> Detections` with the jitted JAX network and decode.
     Points' columns follow the model's `point_features` unless a Frame (named columns) is given.
     `top_k`, `nms_iou` and `max_boxes` default to the family's (Family.predictor): DSFEC 100 /
@@ -121,12 +122,13 @@ class Predictor(HostPipeline):
         cfg = detector.config
         given = {"top_k": top_k, "nms_iou": nms_iou, "max_boxes": max_boxes}
         options = {**zoo.family_of(cfg).points.predictor, **{k: v for k, v in given.items() if v is not None}}
-        self.detector, self.variables = detector, variables
+        self.detector, network_detector = detector, self._inference_detector(detector)
+        self.variables = variables
         self._setup(PillarSpec.of(cfg), head_classes(cfg), score_threshold, options["nms_iou"], options["max_boxes"])
-        self.network = jax.jit(decoded_network(detector, options["top_k"]))
+        self.network = jax.jit(decoded_network(network_detector, options["top_k"]))
 
     def run(self, batch: dict):
-        return jax.device_get(self.network(self.variables, fewest_slots(batch)))
+        return jax.device_get(self.network(self.inference_variables, fewest_slots(batch)))
 
 
 SLOT_BUCKET = 256  # the JAX predictor's pillar-slot sizes: 256, 512, 1024, ... up to max_pillars
