@@ -126,12 +126,12 @@ class CameraPredictor(InferenceVariables, CameraPipeline):
                  score_threshold: float = EVAL_SCORE, nms_iou: float = NMS_IOU,
                  max_detections: int = MAX_DETECTIONS, class_map: Mapping[str, str] | None = None):
         require_modality(detector.config, "image", "CameraPredictor")
-        self.detector, network_detector = detector, self._inference_detector(detector)
+        self.detector = self._inference_detector(detector)  # its inference form (modalities/inference.py)
         self.variables = variables
         self._setup(detector.name, detector.config.classes, size, rect, score_threshold, nms_iou, max_detections,
                     class_map)
-        self.network = jax.jit(decoding_network(network_detector))
+        self.network = jax.jit(decoding_network(self.detector))
 
     def decoded(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        boxes, scores = jax.device_get(self.network(self.inference_variables, images))
+        boxes, scores = jax.device_get(self.network(self.variables, images))
         return np.asarray(boxes), np.asarray(scores)

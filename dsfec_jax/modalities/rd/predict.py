@@ -109,7 +109,7 @@ class RDPredictor(InferenceVariables, RDPipeline):
         require_modality(detector.config, "rd", "RDPredictor")
         if postprocess not in ("host", "compiled"):
             raise ValueError(f"RDPredictor postprocess={postprocess!r}; expected 'host' or 'compiled'")
-        self.detector, network_detector = detector, self._inference_detector(detector)
+        self.detector = self._inference_detector(detector)  # its inference form (modalities/inference.py)
         self.variables = variables
         self.classes, self.representation = tuple(detector.config.classes), representation
         self.input_names = detector.config.input_names
@@ -117,12 +117,12 @@ class RDPredictor(InferenceVariables, RDPipeline):
         self.postprocess = postprocess
         self.kind = TOP_K if detector.config.arch == "v10" else NMS  # YOLOv10 runs NMS-free
         if postprocess == "compiled":
-            self.network = jax.jit(detecting_network(network_detector, nms_iou, score_threshold, max_detections))
+            self.network = jax.jit(detecting_network(self.detector, nms_iou, score_threshold, max_detections))
         else:
-            self.network = jax.jit(decoding_network(network_detector))
+            self.network = jax.jit(decoding_network(self.detector))
 
     def run(self, inputs: dict):
-        out = jax.device_get(self.network(self.inference_variables, inputs))
+        out = jax.device_get(self.network(self.variables, inputs))
         if self.postprocess == "compiled":
             return out
         boxes, scores = (np.asarray(a) for a in out)
