@@ -72,7 +72,7 @@ def _is_eval_bn(module, kwargs) -> bool:
     """A BN over the last axis that normalises with its running averages (what folds)."""
     if isinstance(module, BatchNorm):
         return module.use_running_average
-    if module.axis not in (-1,) or not (module.use_scale and module.use_bias):
+    if module.axis != -1 or not (module.use_scale and module.use_bias):
         return False
     return bool(nn.merge_param("use_running_average", module.use_running_average,
                                kwargs.get("use_running_average")))
