@@ -24,6 +24,7 @@ from typing import Any
 
 import jax
 
+from .layers import bn_fold
 from .models.auxiliary import Auxiliary
 from .models.camera.family import FAMILY as CAMERA
 from .models.depth.auxiliary import AUXILIARY as DEPTH
@@ -105,6 +106,11 @@ class Detector:
             return self.module.apply(variables, **inputs, train=True, mutable=["batch_stats"])
         return self.module.apply(variables, **inputs, train=False)
 
+    def replaced(self, **fields) -> "Detector":
+        """The same kind of detector on this config with `fields` replaced (an implementation
+        choice such as `kernels`: the variables stay valid)."""
+        return Detector(dataclasses.replace(self.config, **fields))
+
     def apply_method(self, variables: dict, method: str, *args, train: bool = False):
         """Run one stage (`encode`, `backbone`, `detect`) in eval mode: for profiling and probes."""
         return self.module.apply(variables, *args, train=train, method=method)
@@ -115,10 +121,66 @@ def deploy_config(cfg):
     return family_of(cfg).deploy_config(cfg)
 
 
-def deploy(detector: Detector, variables: dict) -> tuple[Detector, dict]:
-    """The inference form of a re-parameterizable detector (RadarNeXt: MobileOne branches fused
-    into single convs, training-only outputs dropped) and its variables; eval-mode outputs agree.
-    Families without a deploy form come back unchanged."""
+class FoldedDetector(Detector):
+    """A detector whose evaluation-mode BatchNorms are folded into the convs before them
+    (layers/bn_fold.py): the same `config`, `apply` and `apply_method` on folded variables,
+    evaluation only."""
+
+    def __init__(self, cfg, plan: bn_fold.FoldPlan):
+        super().__init__(cfg)
+        self.plan = plan
+        self._eval = bn_fold.folded_call(self.module.apply, plan)
+
+    def replaced(self, **fields) -> "FoldedDetector":
+        return FoldedDetector(dataclasses.replace(self.config, **fields), self.plan)
+
+    def init(self, rng: jax.Array) -> dict:
+        """Fresh variables, folded."""
+        return bn_fold.folded_variables(super().init(rng), self.plan)
+
+    def apply(self, variables: dict, inputs: dict, train: bool = False):
+        if train:
+            raise ValueError(f"{self.name}: a BatchNorm-folded detector runs in evaluation only; "
+                             "train the detector zoo.create builds")
+        return self._eval(variables, **inputs, train=False)
+
+    def apply_method(self, variables: dict, method: str, *args, train: bool = False):
+        if train:
+            raise ValueError(f"{self.name}: a BatchNorm-folded detector runs in evaluation only")
+        return self._eval(variables, *args, train=False, method=method)
+
+
+class InferenceForm:
+    """How one detector runs at inference, found from its config alone (no weights needed): the
+    family's deploy form (RadarNeXt: MobileOne branches fused, training-only outputs dropped), then
+    every conv -> BatchNorm pair folded (layers/bn_fold.py, as ultralytics' `fuse()`).
+    `.detector` runs what `.variables(trained)` gives; eval-mode outputs agree to float rounding."""
+
+    def __init__(self, detector: Detector):
+        self.trained_config = detector.config
+        self.family = family_of(detector.config)
+        deployed = Detector(self.family.deploy_config(detector.config))
+        inputs = jax.eval_shape(lambda: deployed.dummy_inputs(1))
+        plan = bn_fold.find_folds(lambda v, x: deployed.module.apply(v, **x, train=False),
+                                  deployed.variable_shapes(), inputs)
+        self.detector = FoldedDetector(deployed.config, plan)
+
+    def variables(self, trained: dict) -> dict:
+        """Trained variables (`params`, `batch_stats`) -> the inference form's."""
+        if self.detector.config != self.trained_config:
+            trained = self.family.deploy_variables(self.trained_config, trained)
+        return bn_fold.folded_variables(trained, self.detector.plan)
+
+
+def deploy(detector: Detector, variables: dict, fold_batch_norm: bool = True) -> tuple[Detector, dict]:
+    """The inference form of any detector and its variables (InferenceForm); eval-mode outputs
+    agree. `fold_batch_norm=False`: the family's deploy form only, BNs kept (what the papers count
+    parameters of; unchanged for families without one). A folded detector comes back as it is."""
+    if isinstance(detector, FoldedDetector):
+        return detector, variables
+    if fold_batch_norm:
+        form = InferenceForm(detector)
+        return form.detector, form.variables(variables)
     family = family_of(detector.config)
     fused = family.deploy_config(detector.config)
     if fused == detector.config:

@@ -197,7 +197,7 @@ def deployed_params(name: str, **overrides) -> int:
     """Parameters of the inference (fused) form, as README's RadarNeXt table counts them."""
     det = zoo.create(name, **overrides)
     shapes = jax.eval_shape(det.init, jax.random.key(0))
-    _, fused = zoo.deploy(det, jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), shapes))
+    _, fused = zoo.deploy(det, jax.tree.map(lambda s: np.zeros(s.shape, s.dtype), shapes), fold_batch_norm=False)
     return sum(int(np.prod(x.shape)) for x in jax.tree.leaves(fused["params"]))
 
 

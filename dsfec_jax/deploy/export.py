@@ -25,7 +25,10 @@ def grouped(detector):
     """The same network (same parameters) in the textbook operators ONNX has: the grouped
     depthwise kernel and `kernels="plain"` (Conv and ConvTranspose with constant weights, which
     int8 quantization reads; the training formulations build kernels inside the graph)."""
-    return zoo.Detector(dataclasses.replace(detector.config, depthwise_impl="grouped", kernels="plain"))
+    textbook = {"depthwise_impl": "grouped", "kernels": "plain"}
+    if isinstance(detector, zoo.Detector):
+        return detector.replaced(**textbook)  # a BatchNorm-folded detector stays folded
+    return zoo.Detector(dataclasses.replace(detector.config, **textbook))
 
 
 def onnx_model(fn, specs: list, input_names: list[str], output_names: list[str], name: str = "dsfec",

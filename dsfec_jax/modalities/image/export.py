@@ -92,7 +92,7 @@ def export_camera(detector, variables, out_dir: str | Path, source: dict | None 
 
     require_modality(detector.config, "image", "export_camera")
     hw = check_input_hw(input_hw or street_input_hw())
-    detector, variables = zoo.deploy(detector, variables)  # the inference form (unchanged for this family)
+    detector, variables = zoo.deploy(detector, variables)  # the inference form: BatchNorm folded into the convs
     det = grouped(detector)
     cfg = det.config
     specs = [jax.ShapeDtypeStruct((batch_size, *hw, 3), np.float32)]

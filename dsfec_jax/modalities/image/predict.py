@@ -22,6 +22,7 @@ import jax
 import numpy as np
 
 from ..checks import require_modality
+from ..inference import InferenceVariables
 from ..stages import Stages, carrying, run as run_stages
 from ...core.progress import FIRST_BATCH, bar, stage
 from ...boxes.boxes2d import Boxes2D
@@ -130,18 +131,18 @@ class CameraPipeline:
         return dataclasses.replace(dets.select(keep), xyxy=xyxy[keep], names=names)
 
 
-class CameraPredictor(CameraPipeline):
+class CameraPredictor(InferenceVariables, CameraPipeline):
     """`predictor(image) -> Boxes2D` (original image pixels, scores) with the jitted JAX network."""
 
     def __init__(self, detector, variables, size: int = 416, rect: bool = True,
                  score_threshold: float = EVAL_SCORE, nms_iou: float = NMS_IOU,
                  max_detections: int = MAX_DETECTIONS, class_map: Mapping[str, str] | None = None):
         require_modality(detector.config, "image", "CameraPredictor")
-        # on the device once (numpy weights are converted again on every jitted call)
-        self.detector, self.variables = detector, jax.device_put(variables)
+        self.detector = self._inference_detector(detector)  # its inference form (modalities/inference.py)
+        self.variables = variables
         self._setup(detector.name, detector.config.classes, size, rect, score_threshold, nms_iou, max_detections,
                     class_map)
-        self.network = jax.jit(decoding_network(detector))
+        self.network = jax.jit(decoding_network(self.detector))
 
     def decoded(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         boxes, scores = jax.device_get(self.network(self.variables, images))

@@ -15,6 +15,7 @@ from ...boxes.structures import Boxes
 from ...data.points.frame import Frame
 from ...core.progress import FIRST_BATCH, bar
 from ...data.points.pillarize import PillarSpec, pillarize, select_columns
+from ..inference import InferenceVariables
 from ..stages import Stages, carrying, run as run_stages
 
 
@@ -124,7 +125,7 @@ class HostPipeline:
         return Detections(out, scores.astype(np.float32))
 
 
-class Predictor(HostPipeline):
+class Predictor(InferenceVariables, HostPipeline):
     """`predictor(points_NxF | Frame) -> Detections` with the jitted JAX network and decode.
     Points' columns follow the model's `point_features` unless a Frame (named columns) is given.
     `top_k`, `nms_iou` and `max_boxes` default to the family's (Family.predictor): DSFEC 100 /
@@ -136,10 +137,10 @@ class Predictor(HostPipeline):
         cfg = detector.config
         given = {"top_k": top_k, "nms_iou": nms_iou, "max_boxes": max_boxes}
         options = {**zoo.family_of(cfg).points.predictor, **{k: v for k, v in given.items() if v is not None}}
-        # on the device once (numpy weights are converted again on every jitted call)
-        self.detector, self.variables = detector, jax.device_put(variables)
+        self.detector = self._inference_detector(detector)  # its inference form (modalities/inference.py)
+        self.variables = variables
         self._setup(PillarSpec.of(cfg), head_classes(cfg), score_threshold, options["nms_iou"], options["max_boxes"])
-        self.network = jax.jit(decoded_network(detector, options["top_k"]))
+        self.network = jax.jit(decoded_network(self.detector, options["top_k"]))
 
     def run(self, batch: dict):
         return jax.device_get(self.network(self.variables, fewest_slots(batch)))

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import jax
 
+from ... import zoo
 from ...core.provenance import jsonable
 from ...data.rd.representations import RDRepresentation, fitted_shape
 from ...models.yolo_rd.decode import EVAL_CONF, EVAL_IOU, EVAL_MAX_DET, decode
@@ -84,6 +85,7 @@ def export_rd(detector, variables, out_dir: str | Path, source: dict | None = No
     from ..checks import require_modality
 
     require_modality(detector.config, "rd", "export_rd")
+    detector, variables = zoo.deploy(detector, variables)  # the inference form: BatchNorm folded into the convs
     cfg = detector.config
     rep = export_representation(input_hw, representation)
     specs = input_specs(cfg, input_hw, batch_size)

@@ -14,6 +14,7 @@ import jax
 import numpy as np
 
 from ..checks import require_modality
+from ..inference import InferenceVariables
 from ..stages import Stages, carrying, run as run_stages
 from ...core.progress import FIRST_BATCH, bar
 from ...boxes.boxes2d import Boxes2D
@@ -129,7 +130,7 @@ def decoding_network(detector):
     return lambda variables, inputs: decode(inference_maps(detector.apply(variables, inputs)), cfg.strides, cfg.reg_max)
 
 
-class RDPredictor(RDPipeline):
+class RDPredictor(InferenceVariables, RDPipeline):
     """`predictor(sample) -> Boxes2D` (map pixels) with the jitted JAX network and decode, then the
     post-processing: on the host by default (models/yolo_rd/decode_host: faster once a trained model
     leaves few candidates above the confidence cut), or `postprocess="compiled"` in the same graph."""
@@ -140,17 +141,17 @@ class RDPredictor(RDPipeline):
         require_modality(detector.config, "rd", "RDPredictor")
         if postprocess not in ("host", "compiled"):
             raise ValueError(f"RDPredictor postprocess={postprocess!r}; expected 'host' or 'compiled'")
-        # on the device once (numpy weights are converted again on every jitted call)
-        self.detector, self.variables = detector, jax.device_put(variables)
+        self.detector = self._inference_detector(detector)  # its inference form (modalities/inference.py)
+        self.variables = variables
         self.classes, self.representation = tuple(detector.config.classes), representation
         self.input_names = detector.config.input_names
         self.score_threshold, self.nms_iou, self.max_detections = score_threshold, nms_iou, max_detections
         self.nms_on_host = postprocess == "host"
         self.kind = TOP_K if detector.config.arch == "v10" else NMS  # YOLOv10 runs NMS-free
         if postprocess == "compiled":
-            self.network = jax.jit(detecting_network(detector, nms_iou, score_threshold, max_detections))
+            self.network = jax.jit(detecting_network(self.detector, nms_iou, score_threshold, max_detections))
         else:
-            self.network = jax.jit(decoding_network(detector))
+            self.network = jax.jit(decoding_network(self.detector))
 
     def decoded(self, inputs: dict):
         """The jitted network and decode (with `postprocess="compiled"` also the NMS), as numpy."""

@@ -106,6 +106,20 @@ def test_manifest_and_jax_export_artifact(exports):
     assert [a.shape for a in exported.out_avals] == [(1, 42, 4), (1, 42, 6)]
 
 
+def test_the_export_runs_batch_norm_folded_into_the_convs(exports):
+    """No BN's scale-and-shift after a conv: a conv's (Conv, or MatMul for a 1x1) output is never
+    scaled or shifted by a constant (the SiLU's Mul reads two computed tensors)."""
+    import onnx
+
+    graph = onnx.load(str(exports["yolov8n"][2] / "model.onnx")).graph
+    constants = {t.name for t in graph.initializer} | {o for n in graph.node if n.op_type == "Constant" for o in n.output}
+    conv_outputs = {o for n in graph.node if n.op_type in ("Conv", "MatMul") for o in n.output}
+    assert len(conv_outputs) >= 60 and "BatchNormalization" not in {n.op_type for n in graph.node}
+    scaled = [n.name for n in graph.node if n.op_type in ("Sub", "Mul", "Div")
+              and set(n.input) & conv_outputs and set(n.input) & constants]
+    assert scaled == []
+
+
 def test_ort_rd_predictor_equals_rd_predictor(exports, samples):
     det, variables, path, _ = exports["yolov8n_adapter"]
     ours = OrtRDPredictor(path).predict_samples(samples)
