@@ -156,7 +156,7 @@ def dispatch_inline() -> None:
 
 
 M_TRIM_THRESHOLD, M_MMAP_MAX = -1, -4  # glibc's malloc.h parameter numbers
-MALLOPT_TRIM_THRESHOLD = 2**31 - 1  # mallopt takes an int: the largest (2 GiB), above any step's buffer
+MALLOPT_TRIM_THRESHOLD = 2**31 - 1  # mallopt takes a C int: the largest it holds
 _kept_by_mallopt = False  # set once mallopt_keep_buffers succeeded (what the benchmarks record)
 
 
