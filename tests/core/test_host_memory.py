@@ -244,21 +244,26 @@ print(json.dumps({"applied": applied, "mmapped_bytes": mapped, "async": jax.conf
 """
 
 
-def _tune_probe(mode: str) -> dict:
+def _tune_probes(*modes: str) -> list[dict]:
+    """Run the probe once per mode, all at once (each is a fresh interpreter importing JAX)."""
     import json
 
     env = {k: v for k, v in os.environ.items() if k not in ("GLIBC_TUNABLES", hm.OPT_OUT)}
-    done = subprocess.run([sys.executable, "-c", MALLINFO_PROBE, mode], env=env, capture_output=True, text=True,
-                          timeout=120, cwd=ROOT)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    procs = [subprocess.Popen([sys.executable, "-c", MALLINFO_PROBE, mode], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True, cwd=ROOT) for mode in modes]
+    results = []
+    for proc in procs:
+        out, err = proc.communicate(timeout=180)
+        assert proc.returncode == 0, err[-2000:]
+        results.append(json.loads(out.strip().splitlines()[-1]))
+    return results
 
 
 @pytest.mark.skipif(hm.glibc_version() is None, reason="mallopt is glibc's")
 def test_a_library_process_gets_the_commands_host_settings_in_one_call():
     """api.tune_host keeps large blocks on the heap (no mmap) and turns async dispatch off, without a
     restart; after JAX has started, only the heap part can apply."""
-    untuned, tuned, late = (_tune_probe(mode) for mode in ("untuned", "first", "after_jax"))
+    untuned, tuned, late = _tune_probes("untuned", "first", "after_jax")
     assert untuned["mmapped_bytes"] >= 256 << 20 and untuned["async"] and not untuned["heap_keeps"]
     assert tuned["applied"] == {"keep_buffers": True, "inline_dispatch": True}
     assert tuned["mmapped_bytes"] == 0 and tuned["async"] is False and tuned["heap_keeps"]
