@@ -14,6 +14,8 @@ JAX variants (`--variants`):
 - command: started as the project's commands start (glibc tunables, calls inline: core/host_memory);
 - library: a user's own script, no settings;
 - tuned: a user's script that calls `api.tune_host()` first.
+`--xla-flags FLAGS` adds a side started as a command with those XLA_FLAGS; without `--peer-python`
+the first JAX side is the reference (an A/B of flags or settings alone).
 
 train: the project's YOLOv8n train step on its own augmented RD batches (profile/training.py's
 step, the family's quick schedule), and ultralytics' step on the same batches (experiments/peer_torch.py).
@@ -131,7 +133,7 @@ class Worker:
             self.proc.wait(timeout=60)
 
 
-def _jax_command(args, variant: str, batches: str) -> tuple[list[str], dict]:
+def _jax_command(args, variant: str, batches: str, xla_flags: str = "") -> tuple[list[str], dict]:
     from dsfec_jax.core import host_memory
 
     command = [sys.executable, "-m", "experiments.peer_speed", args.mode, "--worker", "--variant", variant, "--model", args.model, "--threads", str(args.threads), "--batch", str(args.batch),
@@ -142,6 +144,8 @@ def _jax_command(args, variant: str, batches: str) -> tuple[list[str], dict]:
         if tunables:
             env["GLIBC_TUNABLES"] = tunables
     env["PYTHONPATH"] = os.pathsep.join([str(PEER_SCRIPT.parents[1]), env.get("PYTHONPATH", "")])
+    if xla_flags:
+        env["XLA_FLAGS"] = " ".join([env.get("XLA_FLAGS", ""), xla_flags]).strip()
     return command, env
 
 
@@ -163,7 +167,11 @@ def run(args) -> dict:
         try:
             for variant in args.variants:
                 workers.append(Worker(f"jax-{variant}", *_jax_command(args, variant, batches)))
-            workers.append(Worker("torch", _peer_command(args, batches), dict(os.environ)))
+            for flags in args.xla_flags:
+                workers.append(Worker(f"jax-command {flags}", *_jax_command(args, "command", batches, flags)))
+            reference = "torch" if args.peer_python else workers[0].label
+            if args.peer_python:
+                workers.append(Worker("torch", _peer_command(args, batches), dict(os.environ)))
             samples: dict[str, list[list[float]]] = {w.label: [] for w in workers}
             for r in range(args.rounds):
                 for w in workers[r % len(workers):] + workers[:r % len(workers)]:
@@ -175,8 +183,8 @@ def run(args) -> dict:
     per_step = args.batch if args.mode == "train" else 1
     sides = {label: {"median_ms": float(np.median(np.concatenate(rows))),
                      "per_s": per_step * 1e3 / float(np.median(np.concatenate(rows)))} for label, rows in samples.items()}
-    ratios = {f"torch / {label}": spread.percentiles(np.array(rounds["torch"]) / np.array(rounds[label]))
-              for label in rounds if label != "torch"}
+    ratios = {f"{reference} / {label}": spread.percentiles(np.array(rounds[reference]) / np.array(rounds[label]))
+              for label in rounds if label != reference}
     return {"mode": args.mode, "model": args.model, "threads": args.threads, "batch": per_step, "hw": args.hw,
             "rounds": args.rounds, "steps_per_round": args.steps, "sides": sides, "ratios": ratios,
             "command": "python -m experiments.peer_speed " + " ".join(sys.argv[1:]), "versions": _versions(args)}
@@ -185,6 +193,8 @@ def run(args) -> dict:
 def _versions(args) -> dict:
     import jax
 
+    if not args.peer_python:
+        return {"jax": jax.__version__}
     peer = subprocess.run([args.peer_python, "-c", "import torch, ultralytics; print(torch.__version__, "
                            "ultralytics.__version__)"], capture_output=True, text=True, timeout=120).stdout.split()
     return {"jax": jax.__version__, "torch": peer[0] if peer else None, "ultralytics": peer[1] if len(peer) > 1 else None}
@@ -196,7 +206,7 @@ def markdown(record: dict) -> str:
              f"input {record['hw']}; {record['rounds']} interleaved rounds of {record['steps_per_round']}",
              "", f"| side | median ms | {unit} |", "|---|---|---|"]
     lines += [f"| {k} | {v['median_ms']:.2f} | {v['per_s']:.1f} |" for k, v in record["sides"].items()]
-    lines += ["", "| ratio (> 1: JAX ahead) | median | p10-p90 |", "|---|---|---|"]
+    lines += ["", "| ratio of times (> 1: the side after / is faster) | median | p10-p90 |", "|---|---|---|"]
     lines += [f"| {k} | {v['median']:.3f} | {v['p10']:.3f}-{v['p90']:.3f} |" for k, v in record["ratios"].items()]
     return "\n".join(lines)
 
@@ -212,6 +222,8 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--rounds", type=int, default=8)
     p.add_argument("--steps", type=int, default=5, help="timed calls per worker per round")
     p.add_argument("--variants", default="command,library,tuned", type=lambda s: s.split(","))
+    p.add_argument("--xla-flags", action="append", default=[], metavar="FLAGS",
+                   help="also a JAX side started as a command with these XLA_FLAGS (repeatable): a flag's A/B")
     p.add_argument("--out", help="write the record (JSON) here")
     p.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--variant", choices=VARIANTS, help=argparse.SUPPRESS)
@@ -220,8 +232,8 @@ def parse(argv=None) -> argparse.Namespace:
     if args.threads is None:
         args.threads = 2 if args.mode == "train" else 1
     if not args.worker:
-        if not args.peer_python:
-            p.error("--peer-python: an interpreter with torch and ultralytics is needed")
+        if not args.peer_python and len(args.variants) + len(args.xla_flags) < 2:
+            p.error("--peer-python (an interpreter with torch and ultralytics), or at least two JAX sides to compare")
         unknown = sorted(set(args.variants) - set(VARIANTS))
         if unknown:
             p.error(f"--variants: unknown {unknown}; expected some of {list(VARIANTS)}")
