@@ -101,6 +101,9 @@ LIGHT_ENTRY_POINTS = {
     "dsfec_jax/data/points/synthetic/__main__.py", "dsfec_jax/data/rd/synthetic/__main__.py",
     "dsfec_jax/metrics/nuscenes.py", "dsfec_jax/metrics/voc.py",  # numpy scorers of files
     "search/report.py", "search/compare.py", "experiments/radarnext_accuracy.py",  # read records, write reports
+    # the peer comparison's lead and workers: each JAX worker gets its side's settings itself (the
+    # "library" side must run without them), and the torch worker imports no JAX
+    "experiments/peer_speed.py", "experiments/peer_torch.py",
 }
 
 PREPARED_ELSEWHERE = {
