@@ -162,7 +162,9 @@ def _jax_command(args, variant: str, batches: str) -> tuple[list[str], dict]:
 def _peer_command(args, batches: str, twin_case: str | None) -> list[str]:
     command = [args.peer_python, str(PEER_SCRIPT), "--mode", args.mode, "--model", args.model,
                "--threads", str(args.threads), "--hw", args.hw]
-    return command + (["--batches", batches] if args.mode == "train" else []) + (["--twin", twin_case] if twin_case else [])
+    if twin_case:
+        command += ["--twin", twin_case, "--twin-layout", args.twin_layout]
+    return command + (["--batches", batches] if args.mode == "train" else [])
 
 
 def _twin_case(args, folder: str) -> str | None:
@@ -233,8 +235,8 @@ def markdown(record: dict) -> str:
     lines += [f"| {k} | {v['median']:.3f} | {v['p10']:.3f}-{v['p90']:.3f} |" for k, v in record["ratios"].items()]
     if record.get("twin_check"):
         check = record["twin_check"]
-        lines += ["", f"twin check: max |torch - JAX| / max |JAX| = {check['worst_relative']:.2e} over "
-                      f"{len(check['outputs'])} outputs (tolerance {check['tolerance']:.0e})"]
+        lines += ["", f"twin ({check['layout']}) check: max |torch - JAX| / max |JAX| = {check['worst_relative']:.2e} "
+                      f"over {len(check['outputs'])} outputs (tolerance {check['tolerance']:.0e})"]
     return "\n".join(lines)
 
 
@@ -247,6 +249,8 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--batch", type=int, default=16, help="train: images per step")
     p.add_argument("--hw", default=None, help="input height,width (default 256,64; camera twins 256,416; "
                    "DSFEC twins: the grid)")
+    p.add_argument("--twin-layout", default="channels_last", choices=("channels_last", "contiguous"),
+                   help="a PyTorch twin's memory format (experiments/peer_twins.py)")
     p.add_argument("--rounds", type=int, default=8)
     p.add_argument("--steps", type=int, default=5, help="timed calls per worker per round")
     p.add_argument("--variants", default="command,library,tuned", type=lambda s: s.split(","))

@@ -96,7 +96,7 @@ def forward(args):
     import torch
 
     if args.twin:
-        return twin_forward(args.twin)
+        return twin_forward(args.twin, args.twin_layout)
     h, w = (int(v) for v in args.hw.split(","))
     model = _model(args.model, args.channels, args.classes).fuse().eval()
     for module in model.modules():
@@ -113,13 +113,13 @@ def forward(args):
     return call
 
 
-def twin_forward(case: str):
+def twin_forward(case: str, layout: str):
     """fn() running the frozen twin of the project network in `case`; fn.check: its exactness."""
     import torch
 
     from peer_twins import build_checked  # beside this script, which runs with its folder on sys.path
 
-    net, image, check = build_checked(case)
+    net, image, check = build_checked(case, layout)
 
     def call():
         with torch.inference_mode():
@@ -154,6 +154,7 @@ def main(argv=None) -> int:
     p.add_argument("--channels", type=int, default=3)
     p.add_argument("--classes", type=int, default=6)
     p.add_argument("--twin", help="forward: a project network's case (.npz from experiments.twin_export)")
+    p.add_argument("--twin-layout", default="channels_last", help="the twin's memory format (peer_twins.LAYOUTS)")
     args = p.parse_args(argv)
     _threads(args.threads)
     with contextlib.redirect_stdout(sys.stderr):  # stdout carries the protocol alone (ultralytics prints banners)

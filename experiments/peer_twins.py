@@ -372,7 +372,7 @@ def frozen(twin: nn.Module, image: torch.Tensor):
 
 def to_project_layout(t: torch.Tensor, reference: np.ndarray) -> np.ndarray:
     """A twin output (NCHW) in the JAX output's layout (NHWC, the camera's anchors split out)."""
-    return t.permute(0, 2, 3, 1).numpy().reshape(reference.shape)
+    return t.permute(0, 2, 3, 1).contiguous().numpy().reshape(reference.shape)
 
 
 def check(net, image: torch.Tensor, outputs: list[np.ndarray]) -> dict:
@@ -393,12 +393,21 @@ def check(net, image: torch.Tensor, outputs: list[np.ndarray]) -> dict:
             "outputs": rows}
 
 
-def build_checked(path: str):
-    """(frozen twin, its NCHW input, the check) of the case at `path`; raises if the check fails."""
+LAYOUTS = ("channels_last", "contiguous")
+
+
+def build_checked(path: str, layout: str = "channels_last"):
+    """(frozen twin, its input, the check) of the case at `path`; raises if the check fails.
+    `layout`: the tensors' memory format, 'channels_last' (oneDNN's preferred one on the CPU, and
+    PyTorch's advice for convolutional networks there) or 'contiguous' (plain NCHW)."""
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout={layout!r}; expected one of {LAYOUTS}")
     twin, d, image_nhwc, outputs = load(path)
     image = torch.from_numpy(np.ascontiguousarray(image_nhwc.transpose(0, 3, 1, 2)))
+    if layout == "channels_last":
+        twin, image = twin.to(memory_format=torch.channels_last), image.to(memory_format=torch.channels_last)
     net = frozen(twin, image)
-    result = {"model": d["model"], **check(net, image, outputs)}
+    result = {"model": d["model"], "layout": layout, **check(net, image, outputs)}
     if not result["ok"]:
         raise AssertionError(f"{d['model']}: the twin differs from JAX by {result['worst_relative']:.2e} of the "
                              f"output's scale (tolerance {MAX_RELATIVE_ERROR:.0e}): {json.dumps(result['outputs'])}")
@@ -409,10 +418,11 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("case", help="an .npz from `python -m experiments.twin_export`")
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--layout", choices=LAYOUTS, default="channels_last")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     try:
-        _, _, result = build_checked(args.case)
+        _, _, result = build_checked(args.case, args.layout)
     except AssertionError as e:
         print(e, file=sys.stderr)
         return 1
