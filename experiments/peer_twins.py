@@ -274,7 +274,7 @@ def darknet_backbone(weights, d, act) -> list[nn.Module]:
 def shuffle_backbone(weights, d) -> list[nn.Module]:
     stages = []
     for s, repeats in enumerate(d["repeats"]):
-        kernel_unused, act_name = d["stage_styles"][s]
+        act_name = d["stage_styles"][s][1]  # the kernel size comes with the weights
         act = activation(act_name, d["leaky_slope"])
         if s == 0 and d["first_repeat"] == "stem":
             stages.append(conv_bn_act(weights, "backbone/stage0", 2, act))
