@@ -2,6 +2,7 @@
 
     python -m experiments.peer_speed train --peer-python PEER/bin/python            # batch 16, 2 threads
     python -m experiments.peer_speed forward --peer-python PEER/bin/python --model yolov8s --hw 640,640
+    python -m experiments.peer_speed forward --peer-python PEER/bin/python --model baseline   # a PyTorch twin
 
 PEER is any environment with torch and ultralytics (`pip install torch ultralytics`); neither is a
 dependency of the project and nothing here runs in CI. Each side is a worker process pinned to the
@@ -20,7 +21,12 @@ the first JAX side is the reference (an A/B of flags or settings alone).
 train: the project's YOLOv8n train step on its own augmented RD batches (profile/training.py's
 step, the family's quick schedule), and ultralytics' step on the same batches (experiments/peer_torch.py).
 forward: the jitted inference network (weights on the device, `zoo.deploy`'s inference form) and
-ultralytics' fused, frozen TorchScript network, on one image of `--hw`.
+ultralytics' fused, frozen TorchScript network, on one image of `--hw`. For a model of a family
+with a PyTorch twin (DSFEC's: Baseline, DSFEC-S/M/L; the camera YOLOv3s), the peer is the twin
+with the same weights (experiments/twin_export.py, peer_twins.py), frozen TorchScript, and both
+sides run the same network on the same input: DSFEC's 2D network (backbone and detect, after the
+pillar scatter; `--hw` does not apply) or the whole camera network (`--hw`, default 256,416). The
+peer checks its outputs against JAX's before timing; the record keeps that check.
 """
 
 from __future__ import annotations
@@ -34,6 +40,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from . import twin_export
 
 PEER_SCRIPT = Path(__file__).with_name("peer_torch.py")
 VARIANTS = ("command", "library", "tuned")
@@ -67,11 +75,17 @@ def jax_train(model: str, batch: int, batches_out: str):
 
 
 def jax_forward(model: str, hw: tuple[int, int]):
-    """fn() running the jitted inference network on one map or image of `hw`."""
+    """fn() running the jitted inference network on one map or image of `hw` (a twinned model:
+    the network its twin mirrors, on the case's input)."""
     import jax
     import numpy as np
 
     from dsfec_jax import zoo
+
+    if twin_export.family(model):
+        twin = twin_export.case(model, hw)
+        image = jax.device_put(twin.input)
+        return lambda: jax.block_until_ready(twin.run(twin.variables, image))
 
     detector = zoo.create(model)
     detector, variables = zoo.deploy(detector, detector.init(jax.random.key(0)))
@@ -97,7 +111,7 @@ def jax_worker(args) -> int:
         if args.mode == "train":
             fn = jax_train(args.model, args.batch, args.batches_out)
         else:
-            fn = jax_forward(args.model, tuple(int(v) for v in args.hw.split(",")))
+            fn = jax_forward(args.model, _hw(args))
     sys.path.insert(0, str(PEER_SCRIPT.parent))
     from peer_torch import serve  # the same protocol as the peer
 
@@ -113,7 +127,7 @@ class Worker:
     def __init__(self, label: str, command: list[str], env: dict):
         self.label = label
         self.proc = subprocess.Popen(command, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-        self._answer()  # ready
+        self.ready = self._answer()
 
     def _answer(self) -> dict:
         line = self.proc.stdout.readline()
@@ -149,10 +163,28 @@ def _jax_command(args, variant: str, batches: str, xla_flags: str = "") -> tuple
     return command, env
 
 
-def _peer_command(args, batches: str) -> list[str]:
+def _peer_command(args, batches: str, twin_case: str | None) -> list[str]:
     command = [args.peer_python, str(PEER_SCRIPT), "--mode", args.mode, "--model", args.model,
                "--threads", str(args.threads), "--hw", args.hw]
+    if twin_case:
+        command += ["--twin", twin_case, "--twin-layout", args.twin_layout]
     return command + (["--batches", batches] if args.mode == "train" else [])
+
+
+def _twin_case(args, folder: str) -> str | None:
+    """Forward on a twinned model: its case written for the peer (the JAX workers rebuild the same
+    network and weights from the same seed); the input's size becomes the record's `hw`."""
+    if args.mode != "forward" or not twin_export.family(args.model):
+        return None
+    twin = twin_export.case(args.model, _hw(args))
+    path = str(Path(folder) / "twin.npz")
+    twin_export.write(twin, path)
+    args.hw = ",".join(str(v) for v in twin.input.shape[1:3])
+    return path
+
+
+def _hw(args) -> tuple[int, int] | None:
+    return tuple(int(v) for v in args.hw.split(",")) if args.hw else None
 
 
 def run(args) -> dict:
@@ -164,14 +196,16 @@ def run(args) -> dict:
     workers: list[Worker] = []
     with tempfile.TemporaryDirectory() as tmp:
         batches = str(Path(tmp) / "batches.npz")
+        twin_case = _twin_case(args, tmp)
         try:
             for variant in args.variants:
                 workers.append(Worker(f"jax-{variant}", *_jax_command(args, variant, batches)))
             for flags in args.xla_flags:
                 workers.append(Worker(f"jax-command {flags}", *_jax_command(args, "command", batches, flags)))
-            reference = "torch" if args.peer_python else workers[0].label
+            reference, check = ("torch", None) if args.peer_python else (workers[0].label, None)
             if args.peer_python:
-                workers.append(Worker("torch", _peer_command(args, batches), dict(os.environ)))
+                workers.append(Worker("torch", _peer_command(args, batches, twin_case), dict(os.environ)))
+                check = workers[-1].ready.get("check")
             samples: dict[str, list[list[float]]] = {w.label: [] for w in workers}
             for r in range(args.rounds):
                 for w in workers[r % len(workers):] + workers[:r % len(workers)]:
@@ -185,7 +219,9 @@ def run(args) -> dict:
                      "per_s": per_step * 1e3 / float(np.median(np.concatenate(rows)))} for label, rows in samples.items()}
     ratios = {f"{reference} / {label}": spread.percentiles(np.array(rounds[reference]) / np.array(rounds[label]))
               for label in rounds if label != reference}
-    return {"mode": args.mode, "model": args.model, "threads": args.threads, "batch": per_step, "hw": args.hw,
+    peer = None if not args.peer_python else "torch twin" if check else "ultralytics"
+    return {"mode": args.mode, "model": args.model, "peer": peer,
+            "twin_check": check, "threads": args.threads, "batch": per_step, "hw": args.hw,
             "rounds": args.rounds, "steps_per_round": args.steps, "sides": sides, "ratios": ratios,
             "command": "python -m experiments.peer_speed " + " ".join(sys.argv[1:]), "versions": _versions(args)}
 
@@ -208,6 +244,10 @@ def markdown(record: dict) -> str:
     lines += [f"| {k} | {v['median_ms']:.2f} | {v['per_s']:.1f} |" for k, v in record["sides"].items()]
     lines += ["", "| ratio of times (> 1: the side after / is faster) | median | p10-p90 |", "|---|---|---|"]
     lines += [f"| {k} | {v['median']:.3f} | {v['p10']:.3f}-{v['p90']:.3f} |" for k, v in record["ratios"].items()]
+    if record.get("twin_check"):
+        check = record["twin_check"]
+        lines += ["", f"twin ({check['layout']}) check: max |torch - JAX| / max |JAX| = {check['worst_relative']:.2e} "
+                      f"over {len(check['outputs'])} outputs (tolerance {check['tolerance']:.0e})"]
     return "\n".join(lines)
 
 
@@ -218,7 +258,10 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--model", default="yolov8n")
     p.add_argument("--threads", type=int, default=None, help="default: 2 for train, 1 for forward")
     p.add_argument("--batch", type=int, default=16, help="train: images per step")
-    p.add_argument("--hw", default="256,64", help="input height,width")
+    p.add_argument("--hw", default=None, help="input height,width (default 256,64; camera twins 256,416; "
+                   "DSFEC twins: the grid)")
+    p.add_argument("--twin-layout", default="channels_last", choices=("channels_last", "contiguous"),
+                   help="a PyTorch twin's memory format (experiments/peer_twins.py)")
     p.add_argument("--rounds", type=int, default=8)
     p.add_argument("--steps", type=int, default=5, help="timed calls per worker per round")
     p.add_argument("--variants", default="command,library,tuned", type=lambda s: s.split(","))
@@ -231,6 +274,8 @@ def parse(argv=None) -> argparse.Namespace:
     args = p.parse_args(argv)
     if args.threads is None:
         args.threads = 2 if args.mode == "train" else 1
+    if args.hw is None and not args.worker and not twin_export.family(args.model):
+        args.hw = "256,64"
     if not args.worker:
         if not args.peer_python and len(args.variants) + len(args.xla_flags) < 2:
             p.error("--peer-python (an interpreter with torch and ultralytics), or at least two JAX sides to compare")

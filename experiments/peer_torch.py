@@ -4,6 +4,7 @@ as a worker the lead process drives. It runs under an interpreter that has torch
 
     PEER_PYTHON experiments/peer_torch.py --mode train --model yolov8n --threads 2 --batches B.npz
     PEER_PYTHON experiments/peer_torch.py --mode forward --model yolov8n --threads 1 --hw 256,64 --channels 3
+    PEER_PYTHON experiments/peer_torch.py --mode forward --twin CASE.npz --threads 1
 
 Protocol (what makes the lead's interleaving possible): after building, the worker prints one JSON
 line {"ready": ...}; then each line "N" on stdin runs N timed calls and answers {"ms": [...]};
@@ -15,7 +16,10 @@ line {"ready": ...}; then each line "N" on stdin runs N timed calls and answers 
   augmented batches: images B x H x W x C, boxes xyxy pixels, labels, mask), cycled.
 - forward: the inference network as ultralytics deploys it, `model.fuse()` (BatchNorm folded
   into the convolutions) in eval mode under `torch.inference_mode`, traced and frozen with
-  TorchScript, on a fixed random image.
+  TorchScript, on a fixed random image. With `--twin CASE.npz` (from `experiments.twin_export`):
+  the PyTorch twin of a project network with the project's weights (experiments/peer_twins.py),
+  traced and frozen, on the case's input; the worker checks it against the case's JAX outputs
+  before it answers ready (and exits if they differ), and the ready line carries the check.
 """
 
 from __future__ import annotations
@@ -91,6 +95,8 @@ def forward(args):
     """fn() running the fused, frozen TorchScript network once."""
     import torch
 
+    if args.twin:
+        return twin_forward(args.twin, args.twin_layout)
     h, w = (int(v) for v in args.hw.split(","))
     model = _model(args.model, args.channels, args.classes).fuse().eval()
     for module in model.modules():
@@ -107,10 +113,26 @@ def forward(args):
     return call
 
 
+def twin_forward(case: str, layout: str):
+    """fn() running the frozen twin of the project network in `case`; fn.check: its exactness."""
+    import torch
+
+    from peer_twins import build_checked  # beside this script, which runs with its folder on sys.path
+
+    net, image, check = build_checked(case, layout)
+
+    def call():
+        with torch.inference_mode():
+            net(image)
+
+    call.check = check
+    return call
+
+
 def serve(fn) -> None:
-    """The worker protocol: a ready line, then timed calls on request."""
+    """The worker protocol: a ready line (with fn.check where fn has one), then timed calls on request."""
     fn()  # a first call outside the timing (allocation, TorchScript's profiling run)
-    print(json.dumps({"ready": True}), flush=True)
+    print(json.dumps({"ready": True, **({"check": fn.check} if hasattr(fn, "check") else {})}), flush=True)
     for line in sys.stdin:
         if line.strip() in ("", "quit"):
             break
@@ -131,6 +153,8 @@ def main(argv=None) -> int:
     p.add_argument("--hw", default="256,64", help="forward: input height,width")
     p.add_argument("--channels", type=int, default=3)
     p.add_argument("--classes", type=int, default=6)
+    p.add_argument("--twin", help="forward: a project network's case (.npz from experiments.twin_export)")
+    p.add_argument("--twin-layout", default="channels_last", help="the twin's memory format (peer_twins.LAYOUTS)")
     args = p.parse_args(argv)
     _threads(args.threads)
     with contextlib.redirect_stdout(sys.stderr):  # stdout carries the protocol alone (ultralytics prints banners)

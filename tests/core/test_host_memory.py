@@ -103,7 +103,7 @@ LIGHT_ENTRY_POINTS = {
     "search/report.py", "search/compare.py", "experiments/radarnext_accuracy.py",  # read records, write reports
     # the peer comparison's lead and workers: each JAX worker gets its side's settings itself (the
     # "library" side must run without them), and the torch worker imports no JAX
-    "experiments/peer_speed.py", "experiments/peer_torch.py",
+    "experiments/peer_speed.py", "experiments/peer_torch.py", "experiments/peer_twins.py",
 }
 
 PREPARED_ELSEWHERE = {
