@@ -26,7 +26,7 @@ class InferenceVariables:
 
     def _inference_detector(self, detector):
         """The detector the jitted network runs for the trained `detector`."""
-        plain = isinstance(detector, zoo.Detector) and not isinstance(detector, zoo.FoldedDetector)
+        plain = type(detector) is zoo.Detector  # a subclass (a NAS supernet wrapper) has inputs of its own: as it is
         self._form = zoo.InferenceForm(detector) if plain else None
         return self._form.detector if plain else detector
 
