@@ -198,8 +198,8 @@ class SubnetRDPredictor(RDPredictor):
 
     subnet: dict = {}
 
-    def run(self, inputs: dict):
-        return super().run({**inputs, **self.subnet})
+    def decoded(self, inputs: dict):
+        return super().decoded({**inputs, **self.subnet})
 
 
 def recalibrator(det, momentum: float = BN_MOMENTUM):
