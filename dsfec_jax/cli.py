@@ -433,10 +433,18 @@ LIGHT_COMMANDS = ("serve",)  # run no XLA: the map service starts light and give
 
 def main(argv=None) -> int:
     args = parse(argv)  # --help and argument errors exit here, before anything heavy
-    if args.command not in LIGHT_COMMANDS:
-        from .core.host_memory import prepare_xla_process
+    if args.command in LIGHT_COMMANDS:
+        return run_command(args)
+    from .core import progress
+    from .core.host_memory import prepare_xla_process
 
+    # the watchdog speaks for every wait no stage or bar covers (a restart below ends it with the process)
+    with progress.watched(f"dsfec {args.command}"):
         prepare_xla_process()  # XLA's settings first: may restart this command (core/host_memory.py)
+        return run_command(args)
+
+
+def run_command(args) -> int:
     if args.command in EDGE_COMMANDS:
         from . import cli_edge
 

@@ -7,7 +7,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from dsfec_jax.core import atomic
+from dsfec_jax.core import atomic, progress
 
 from .recipes import PROFILES, get_recipe
 from .report import write_reports
@@ -55,7 +55,13 @@ def seed_count(seeds: int | None, strategy: str, recipe) -> int:
 
 
 def run_search(args, name: str, candidates_fn, title: str, base_label: str | None) -> int:
-    """Validate every candidate first, then run the missing trials and write the reports."""
+    """Validate every candidate first, then run the missing trials and write the reports (under the
+    silence watchdog: no wait goes unexplained)."""
+    with progress.watched(args.prog, enabled=not getattr(args, "no_progress", False)):
+        return _run_search(args, name, candidates_fn, title, base_label)
+
+
+def _run_search(args, name: str, candidates_fn, title: str, base_label: str | None) -> int:
     try:
         recipe = get_recipe(args.profile, args.base)
         candidates = candidates_fn()

@@ -15,6 +15,14 @@ inside a stage: the item that compiles.
     for start in bar(range(0, n, 8), "detecting", first="compiling the predictor"):
         ...
 
+A command runs `watched`: whatever it does between the lines above (importing JAX, loading weights
+and folding them, writing its outputs, a bar item slower than the heartbeat on a busy machine),
+once stderr has been quiet for a heartbeat the watchdog says what the command is doing, from the
+innermost `doing` phase (stages and bars are phases too).
+
+    with watched("dsfec eval"), doing("loading the model"):
+        ...
+
 `DSFEC_QUIET=1` silences every stage and bar (tests that parse stderr, scripted runs).
 """
 
@@ -33,6 +41,9 @@ HEARTBEAT_S = 8.0  # under the 10 s a command may stay quiet, with room for a bu
 GENERATION_DELAY_S = 2.0  # a generated data set quicker than this needs no bar
 # a predictor's first batch: the wait before its bar moves (an ONNX Runtime session has no compile)
 FIRST_BATCH = "running the first batch (a JAX predictor compiles its network on it)"
+
+
+_PHASES: list[str] = []  # what the running command is doing, innermost last (the main thread's)
 
 
 def quiet() -> bool:
@@ -56,20 +67,15 @@ def stage(what: str, usual: str | None = None, *, heartbeat_s: float = HEARTBEAT
         yield
         return
     _say(f"{what}..." + (f" (usually {usual})" if usual else ""), stream)
-    done = threading.Event()
     t0 = time.perf_counter()
 
     def beat() -> None:
-        while not done.wait(heartbeat_s):
-            _say(f"... still {what} ({time.perf_counter() - t0:.0f} s)", stream)
+        _say(f"... still {what} ({time.perf_counter() - t0:.0f} s)", stream)
 
-    thread = threading.Thread(target=beat, name=f"progress: {what}", daemon=True)
-    thread.start()
     try:
-        yield
+        with doing(what), _every(heartbeat_s, beat, f"progress: {what}"):
+            yield
     finally:
-        done.set()
-        thread.join()
         _say(f"{what}: done in {time.perf_counter() - t0:.1f} s", stream)
 
 
@@ -78,9 +84,10 @@ def bar(items: Iterable, desc: str, *, first: str | None = None, usual: str | No
     """`items` through a tqdm bar on stderr (`options` go to tqdm: total, unit, leave, ...); with
     `first`, the caller's work on the first item runs inside stage(first, usual): a bar stands
     still while its first item compiles, so that wait says what it is doing."""
-    for i, item in enumerate(tqdm(items, desc=desc, disable=not enabled or quiet(), **options)):
-        with stage(first or "", usual, enabled=enabled and first is not None and i == 0):
-            yield item  # the stage stays open until the caller asks for the second item
+    with doing(desc):
+        for i, item in enumerate(tqdm(items, desc=desc, disable=not enabled or quiet(), **options)):
+            with stage(first or "", usual, enabled=enabled and first is not None and i == 0):
+                yield item  # the stage stays open until the caller asks for the second item
 
 
 def generating(items: Iterable, desc: str, **options) -> Iterator:
@@ -88,3 +95,80 @@ def generating(items: Iterable, desc: str, **options) -> Iterator:
     generation has taken GENERATION_DELAY_S (the tiny sets of tests and scorers stay quiet) and
     cleared when it ends."""
     return bar(items, desc, delay=GENERATION_DELAY_S, leave=False, **options)
+
+
+@contextlib.contextmanager
+def doing(what: str) -> Iterator[None]:
+    """Name what the command does inside this block, for the watchdog's line; prints nothing."""
+    _PHASES.append(what)
+    try:
+        yield
+    finally:
+        _leave(what)
+
+
+def _leave(what: str) -> None:
+    """Drop the innermost `what` (a bar left early is closed whenever its generator is collected,
+    so its phase need not be the innermost one by then)."""
+    for i in range(len(_PHASES) - 1, -1, -1):
+        if _PHASES[i] == what:
+            del _PHASES[i]
+            return
+
+
+class _Timed:
+    """A text stream that remembers when it was last written to (tqdm's bars included)."""
+
+    def __init__(self, stream: TextIO):
+        self.stream = stream
+        self.last = time.monotonic()
+
+    def write(self, text: str) -> int:
+        self.last = time.monotonic()
+        return self.stream.write(text)
+
+    def __getattr__(self, name: str):
+        return getattr(self.stream, name)
+
+
+@contextlib.contextmanager
+def watched(command: str, *, heartbeat_s: float = HEARTBEAT_S, poll_s: float = 0.5,
+            enabled: bool = True) -> Iterator[None]:
+    """Run a command under the silence watchdog: when stderr has been quiet for `heartbeat_s`,
+    say '... <command>: still <innermost phase> (N s in)', so that no wait goes unexplained."""
+    if not enabled or quiet():
+        yield
+        return
+    timed = _Timed(sys.stderr)
+    sys.stderr = timed
+    t0 = time.monotonic()
+
+    def watch() -> None:
+        if time.monotonic() - timed.last >= heartbeat_s:
+            phases = list(_PHASES)
+            what = phases[-1] if phases else "starting (importing JAX and the project)"
+            _say(f"... {command}: still {what} ({time.monotonic() - t0:.0f} s in)", timed)
+
+    try:
+        with _every(poll_s, watch, f"watchdog: {command}"):
+            yield
+    finally:
+        sys.stderr = timed.stream
+
+
+@contextlib.contextmanager
+def _every(interval_s: float, fn, name: str) -> Iterator[None]:
+    """Call fn every `interval_s` on a daemon thread while the block runs."""
+    done = threading.Event()
+
+    def loop() -> None:
+        while not done.wait(interval_s):
+            fn()
+
+    thread = threading.Thread(target=loop, name=name, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        done.set()
+        thread.join()

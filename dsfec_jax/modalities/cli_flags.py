@@ -10,6 +10,9 @@ from pathlib import Path
 
 from .. import zoo
 
+# the phase a predictor's construction runs in (the watchdog's words for it on a slow start)
+LOADING = "loading {}: its weights onto the device, BatchNorm folded into the convs"
+
 # flags of the point-cloud pipeline (pillars, BEV windows, per-head top-k): attribute -> flag
 POINT_FLAGS = {"window": "--window", "window_sampling": "--window-sampling", "max_pillars": "--max-pillars",
                "top_k": "--top-k"}

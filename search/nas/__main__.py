@@ -28,6 +28,8 @@ import argparse
 import shlex
 import sys
 
+from dsfec_jax.core import progress
+
 from .run import PROFILES, run_nas
 from .spaces import SPACES
 from .spos import SAMPLINGS
@@ -86,11 +88,12 @@ def main(argv=None) -> int:
     limits = {k: v for k, v in (("params", args.max_params), ("gflops", args.max_gflops),
                                 ("latency_ms", args.max_latency_ms)) if v is not None}
     run_dir = args.run_dir or f"runs/nas/{args.space}_{args.profile}_{args.strategy}"
-    report = run_nas(args.space, run_dir, args.profile, args.strategy, limits, args.seed, args.objective,
-                     command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress,
-                     register_as=args.register, latency_path=args.latency_table, standalone=args.standalone,
-                     spread=args.spread, spread_by=args.spread_by, backend=args.backend, address=args.address,
-                     workers=args.workers, sampling=args.sampling, record_path=args.record)
+    with progress.watched("search.nas", enabled=not args.no_progress):
+        report = run_nas(args.space, run_dir, args.profile, args.strategy, limits, args.seed, args.objective,
+                         command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress,
+                         register_as=args.register, latency_path=args.latency_table, standalone=args.standalone,
+                         spread=args.spread, spread_by=args.spread_by, backend=args.backend, address=args.address,
+                         workers=args.workers, sampling=args.sampling, record_path=args.record)
     print(f"report: {report}")
     return 0
 

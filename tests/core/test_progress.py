@@ -2,6 +2,7 @@
 
 import io
 import re
+import sys
 import time
 
 from dsfec_jax.core import progress
@@ -67,3 +68,37 @@ def test_a_generation_bar_shows_only_once_the_generation_is_slow(capsys, monkeyp
     for _ in progress.generating(range(4), "generating slow maps"):
         time.sleep(0.04)
     assert "generating slow maps" in capsys.readouterr().err
+
+
+def test_the_watchdog_names_the_innermost_phase_when_stderr_is_quiet(capsys):
+    with progress.watched("dsfec test", heartbeat_s=0.2, poll_s=0.02):
+        time.sleep(0.35)  # no phase yet: the start
+        with progress.doing("loading the model"):
+            time.sleep(0.35)
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("... dsfec test: still")]
+    assert any("starting" in line for line in lines), err
+    assert any("still loading the model" in line for line in lines), err
+
+
+def test_the_watchdog_keeps_quiet_while_the_command_speaks_and_gives_stderr_back(capsys):
+    stream = sys.stderr
+    with progress.watched("dsfec test", heartbeat_s=0.3, poll_s=0.02):
+        for _ in range(12):
+            print("working", file=sys.stderr)
+            time.sleep(0.05)
+    assert "still" not in capsys.readouterr().err
+    assert sys.stderr is stream
+
+
+def test_a_bar_is_a_phase_and_a_bar_left_early_gives_its_phase_back(capsys):
+    with progress.watched("dsfec test", heartbeat_s=0.2, poll_s=0.02):
+        for _ in progress.bar(range(3), "detecting in 3 frames"):
+            time.sleep(0.3)
+            break
+        with progress.doing("writing the outputs"):
+            time.sleep(0.3)
+    lines = [line for line in capsys.readouterr().err.splitlines() if "still" in line]
+    assert any("still detecting in 3 frames" in line for line in lines), lines
+    assert "still writing the outputs" in lines[-1], lines
+    assert progress._PHASES == []

@@ -43,10 +43,11 @@ import sys
 from pathlib import Path
 
 from ... import zoo
+from ...core import progress
 from ...models.camera.decode import EVAL_SCORE
 from ...models.camera.family import FAMILY as CAMERA, class_fields
 from .. import files
-from ..cli_flags import check_export_model, export_weights, onnx_predictor, refuse_point_flags, weights_or_exit
+from ..cli_flags import LOADING, check_export_model, export_weights, onnx_predictor, refuse_point_flags, weights_or_exit
 from ..pictures import planned
 from .files import READER
 from .predict import CameraPredictor
@@ -176,9 +177,10 @@ def _predictor(args, cfg, score_threshold: float):
         mapping = None if data_classes is None else class_map(cfg.classes, data_classes)
     except (TypeError, ValueError) as err:
         sys.exit(f"dsfec {args.command}: {err}")
-    detector, variables = weights_or_exit(args, cfg)
-    return CameraPredictor(detector, variables, score_threshold=score_threshold, size=eval_size(args),
-                           class_map=mapping)
+    with progress.doing(LOADING.format(cfg.name)):
+        detector, variables = weights_or_exit(args, cfg)
+        return CameraPredictor(detector, variables, score_threshold=score_threshold, size=eval_size(args),
+                               class_map=mapping)
 
 
 def eval_or_predict(args, cfg) -> tuple:

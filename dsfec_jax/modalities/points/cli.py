@@ -24,9 +24,10 @@ import sys
 from pathlib import Path
 
 from ... import zoo
+from ...core import progress
 from ...core.defaults import POINT_SCORE_THRESHOLD, RUN_PILLARS
 from .. import files
-from ..cli_flags import export_weights, onnx_predictor, refuse_camera_flags
+from ..cli_flags import LOADING, export_weights, onnx_predictor, refuse_camera_flags
 from ..pictures import planned
 from .files import READER
 from .predict import Predictor
@@ -75,11 +76,12 @@ def _predictor(args, cfg, threshold: float):
         from .ort import OrtPredictor
 
         return onnx_predictor(args, lambda export_dir: OrtPredictor(export_dir, score_threshold=threshold))
-    try:
-        detector, variables = zoo.trained_detector(cfg, args.weights)
-    except FileNotFoundError as err:
-        sys.exit(f"dsfec {args.command}: {err} (--weights)")
-    return Predictor(detector, variables, score_threshold=threshold)
+    with progress.doing(LOADING.format(cfg.name)):
+        try:
+            detector, variables = zoo.trained_detector(cfg, args.weights)
+        except FileNotFoundError as err:
+            sys.exit(f"dsfec {args.command}: {err} (--weights)")
+        return Predictor(detector, variables, score_threshold=threshold)
 
 
 def eval_or_predict(args, cfg) -> tuple:

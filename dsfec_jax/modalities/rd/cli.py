@@ -27,9 +27,10 @@ import sys
 from pathlib import Path
 
 from ... import zoo
+from ...core import progress
 from ...models.yolo_rd.decode import EVAL_CONF
 from .. import files
-from ..cli_flags import export_weights, onnx_predictor, refuse_camera_flags, refuse_point_flags, weights_or_exit
+from ..cli_flags import LOADING, export_weights, onnx_predictor, refuse_camera_flags, refuse_point_flags, weights_or_exit
 from ..pictures import planned
 from .files import READER
 from .predict import RDPredictor
@@ -87,8 +88,9 @@ def _predictor(args, cfg, score_threshold: float):
         from .ort import OrtRDPredictor
 
         return onnx_predictor(args, lambda export_dir: OrtRDPredictor(export_dir, score_threshold=score_threshold))
-    detector, variables = weights_or_exit(args, cfg)
-    return RDPredictor(detector, variables, score_threshold=score_threshold)
+    with progress.doing(LOADING.format(cfg.name)):
+        detector, variables = weights_or_exit(args, cfg)
+        return RDPredictor(detector, variables, score_threshold=score_threshold)
 
 
 def eval_or_predict(args, cfg) -> tuple:
