@@ -24,7 +24,7 @@ from typing import Any
 
 import jax
 
-from .layers import bn_fold
+from .layers import bn_fold, conv_product
 from .models.auxiliary import Auxiliary
 from .models.camera.family import FAMILY as CAMERA
 from .models.depth.auxiliary import AUXILIARY as DEPTH
@@ -124,15 +124,18 @@ def deploy_config(cfg):
 class FoldedDetector(Detector):
     """A detector whose evaluation-mode BatchNorms are folded into the convs before them
     (layers/bn_fold.py): the same `config`, `apply` and `apply_method` on folded variables,
-    evaluation only."""
+    evaluation only. With `conv_products` (the JAX runtime's form), the small wide convs run as one
+    matrix product on the CPU (layers/conv_product.py); an export keeps plain convs."""
 
-    def __init__(self, cfg, plan: bn_fold.FoldPlan):
+    def __init__(self, cfg, plan: bn_fold.FoldPlan, conv_products: bool = True):
         super().__init__(cfg)
         self.plan = plan
-        self._eval = bn_fold.folded_call(self.module.apply, plan)
+        self.conv_products = conv_products
+        call = conv_product.product_call(self.module.apply) if conv_products else self.module.apply
+        self._eval = bn_fold.folded_call(call, plan)  # the fold's interceptor outside: it adds after each conv
 
     def replaced(self, **fields) -> "FoldedDetector":
-        return FoldedDetector(dataclasses.replace(self.config, **fields), self.plan)
+        return FoldedDetector(dataclasses.replace(self.config, **fields), self.plan, self.conv_products)
 
     def init(self, rng: jax.Array) -> dict:
         """Fresh variables, folded."""
@@ -156,14 +159,14 @@ class InferenceForm:
     every conv -> BatchNorm pair folded (layers/bn_fold.py, as ultralytics' `fuse()`).
     `.detector` runs what `.variables(trained)` gives; eval-mode outputs agree to float rounding."""
 
-    def __init__(self, detector: Detector):
+    def __init__(self, detector: Detector, for_export: bool = False):
         self.trained_config = detector.config
         self.family = family_of(detector.config)
         deployed = Detector(self.family.deploy_config(detector.config))
         inputs = jax.eval_shape(lambda: deployed.dummy_inputs(1))
         plan = bn_fold.find_folds(lambda v, x: deployed.module.apply(v, **x, train=False),
                                   deployed.variable_shapes(), inputs)
-        self.detector = FoldedDetector(deployed.config, plan)
+        self.detector = FoldedDetector(deployed.config, plan, conv_products=not for_export)
 
     def variables(self, trained: dict) -> dict:
         """Trained variables (`params`, `batch_stats`) -> the inference form's."""
@@ -172,14 +175,18 @@ class InferenceForm:
         return bn_fold.folded_variables(trained, self.detector.plan)
 
 
-def deploy(detector: Detector, variables: dict, fold_batch_norm: bool = True) -> tuple[Detector, dict]:
+def deploy(detector: Detector, variables: dict, fold_batch_norm: bool = True,
+           for_export: bool = False) -> tuple[Detector, dict]:
     """The inference form of any detector and its variables (InferenceForm); eval-mode outputs
     agree. `fold_batch_norm=False`: the family's deploy form only, BNs kept (what the papers count
-    parameters of; unchanged for families without one). A folded detector comes back as it is."""
+    parameters of; unchanged for families without one). `for_export`: every conv stays a conv (no
+    CPU matrix-product form), as an ONNX graph wants. A folded detector comes back as it is."""
     if isinstance(detector, FoldedDetector):
+        if for_export and detector.conv_products:
+            return FoldedDetector(detector.config, detector.plan, conv_products=False), variables
         return detector, variables
     if fold_batch_norm:
-        form = InferenceForm(detector)
+        form = InferenceForm(detector, for_export)
         return form.detector, form.variables(variables)
     family = family_of(detector.config)
     fused = family.deploy_config(detector.config)

@@ -1,9 +1,15 @@
-"""BatchNorm folded vs kept: the jitted forward of a detector's inference form (zoo.deploy) against
-its trained network, interleaved in one process at 1 thread (A, B, A, B, ...), weights on the
-device for both. Prints per model the median ms of each and the median ratio kept / folded with
-its p10-p90 spread over the rounds.
+"""The inference form's parts, A/B: the jitted forward of two forms of one detector interleaved in
+one process at 1 thread (A, B, A, B, ...), weights on the device for both. Prints per model the
+median ms of each and the median ratio A / B with its p10-p90 spread over the rounds.
+
+`--ab fold` (A: the trained network, BNs kept; B: BNs folded, every conv XLA's);
+`--ab products` (A: the export's form, every conv XLA's; B: the runtime's, the small wide convs as
+one matrix product, layers/conv_product.py); `--grid` times single 3x3 convs both ways over image
+sizes and widths (where conv_product's MAX_PIXELS and MIN_CHANNELS come from).
 
     python -m experiments.bn_fold_speed --models yolov8n,dsfec_s,shuffle_yolov3 --rounds 200
+    python -m experiments.bn_fold_speed --ab products --models yolov3_darknet53,yolov8n --rounds 30
+    python -m experiments.bn_fold_speed --grid --rounds 15
 """
 
 from __future__ import annotations
@@ -17,37 +23,61 @@ import argparse
 import time
 
 
-def forward_pair(name: str, hw):
-    """(kept, folded): zero-argument callables running the jitted forward to completion."""
+def forward_pair(name: str, hw, ab: str = "fold"):
+    """(A, B): zero-argument callables running the jitted forward to completion."""
     import jax
 
     from dsfec_jax import zoo
 
     det = zoo.create(name)
     variables = jax.device_put(det.init(jax.random.key(0)))
-    folded_det, folded = zoo.deploy(det, variables)
-    folded = jax.device_put(folded)
+    convs = zoo.deploy(det, variables, for_export=True)  # folded, every conv XLA's
+    first, second = ((det, variables), convs) if ab == "fold" else (convs, zoo.deploy(det, variables))
     inputs = det.config.dummy_inputs(1, hw=hw) if hw else det.dummy_inputs(1)
     inputs = jax.device_put(inputs)
-    kept_fn, folded_fn = jax.jit(det.apply), jax.jit(folded_det.apply)
-    return (lambda: jax.block_until_ready(kept_fn(variables, inputs)),
-            lambda: jax.block_until_ready(folded_fn(folded, inputs)))
+    return tuple(_run(d.apply, jax.device_put(v), inputs) for d, v in (first, second))
 
 
-def interleaved(kept, folded, rounds: int, per_round: int) -> dict:
+def _run(fn, *args):
+    import jax
+
+    jitted = jax.jit(fn)
+    return lambda: jax.block_until_ready(jitted(*args))
+
+
+def conv_pair(pixels_hw, channels: int):
+    """(XLA's conv, the product form) of one 3x3 stride-1 conv from `channels` to 2 x `channels`."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from dsfec_jax.layers import conv, conv_product
+
+    rng = np.random.default_rng(0)
+    x = jnp.asarray(rng.standard_normal((1, *pixels_hw, channels)), jnp.float32)
+    w = jnp.asarray(rng.standard_normal((3, 3, channels, 2 * channels)), jnp.float32)
+    pads = ((1, 1), (1, 1))
+    return (_run(lambda x, w: conv.plain_conv(x, w, pads), x, w),
+            _run(lambda x, w: conv_product.conv_as_product(x, w, 1, pads), x, w))
+
+
+def interleaved(first, second, rounds: int, per_round: int) -> dict:
     from dsfec_jax.core.spread import percentiles
 
-    for fn in (kept, folded, kept, folded):
+    for fn in (first, second, first, second):
         fn()
     a, b = [], []
     for _ in range(rounds):
-        for fn, out in ((kept, a), (folded, b)):
+        for fn, out in ((first, a), (second, b)):
             t0 = time.perf_counter()
             for _ in range(per_round):
                 fn()
             out.append(1e3 * (time.perf_counter() - t0) / per_round)
-    return {"kept_ms": percentiles(a), "folded_ms": percentiles(b),
-            "ratio": percentiles([x / y for x, y in zip(a, b)])}
+    return {"a_ms": percentiles(a), "b_ms": percentiles(b), "ratio": percentiles([x / y for x, y in zip(a, b)])}
+
+
+def _line(label: str, r: dict, a: str, b: str) -> str:
+    return (f"{label}: {a} {r['a_ms']['median']:.2f} ms, {b} {r['b_ms']['median']:.2f} ms, "
+            f"{a}/{b} {r['ratio']['median']:.3f} ({r['ratio']['p10']:.3f}-{r['ratio']['p90']:.3f})")
 
 
 # input sizes: the RD maps the issue quotes (256 x 64); DSFEC its grid; the camera model the street frames'
@@ -60,15 +90,27 @@ def main(argv=None) -> int:
     p.add_argument("--rounds", type=int, default=100)
     p.add_argument("--per-round", type=int, default=3, help="forwards per timing (their mean)")
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--ab", choices=("fold", "products"), default="fold")
+    p.add_argument("--grid", action="store_true", help="single 3x3 convs, XLA's against the product form")
     args = p.parse_args(argv)
     from dsfec_jax.core import threads
 
     threads.pin(args.threads)  # before XLA starts
+    if args.grid:
+        for hw in GRID_HW:
+            for channels in GRID_CHANNELS:
+                r = interleaved(*conv_pair(hw, channels), args.rounds, args.per_round)
+                print(_line(f"3x3 conv {hw[0]}x{hw[1]} px, {channels}->{2 * channels}", r, "xla", "product"), flush=True)
+        return 0
+    names = ("kept", "folded") if args.ab == "fold" else ("convs", "products")
     for name in args.models.split(","):
-        r = interleaved(*forward_pair(name, HW.get(name)), args.rounds, args.per_round)
-        print(f"{name}: kept {r['kept_ms']['median']:.2f} ms, folded {r['folded_ms']['median']:.2f} ms, "
-              f"kept/folded {r['ratio']['median']:.3f} ({r['ratio']['p10']:.3f}-{r['ratio']['p90']:.3f})", flush=True)
+        r = interleaved(*forward_pair(name, HW.get(name), args.ab), args.rounds, args.per_round)
+        print(_line(name, r, *names), flush=True)
     return 0
+
+
+GRID_HW = ((8, 13), (16, 26), (32, 52), (64, 104))  # Darknet-53's strides 32..4 at 256 x 416
+GRID_CHANNELS = (64, 128, 256, 512)
 
 
 if __name__ == "__main__":

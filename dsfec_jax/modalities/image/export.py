@@ -92,7 +92,8 @@ def export_camera(detector, variables, out_dir: str | Path, source: dict | None 
 
     require_modality(detector.config, "image", "export_camera")
     hw = check_input_hw(input_hw or street_input_hw())
-    detector, variables = zoo.deploy(detector, variables)  # the inference form: BatchNorm folded into the convs
+    # the inference form (BatchNorm folded into the convs), every conv kept a Conv node
+    detector, variables = zoo.deploy(detector, variables, for_export=True)
     det = grouped(detector)
     cfg = det.config
     specs = [jax.ShapeDtypeStruct((batch_size, *hw, 3), np.float32)]

@@ -51,7 +51,8 @@ def end_to_end(detector, variables, top_k: int = 100, with_maps: bool = False):
 def export(detector, variables, out_dir: str | Path, top_k: int = 100, batch_size: int = 1,
            with_maps: bool = False, source: dict | None = None) -> dict:
     """Write model.onnx, model.jax_export and deploy.json to out_dir -> {name: path}."""
-    detector, variables = zoo.deploy(detector, variables)  # the inference form: re-parameterized, BatchNorm folded
+    # the inference form (re-parameterized, BatchNorm folded), every conv kept a Conv node
+    detector, variables = zoo.deploy(detector, variables, for_export=True)
     det = grouped(detector)
     cfg = det.config
     outputs = OUTPUTS + (map_outputs(cfg) if with_maps else ())

@@ -85,7 +85,8 @@ def export_rd(detector, variables, out_dir: str | Path, source: dict | None = No
     from ..checks import require_modality
 
     require_modality(detector.config, "rd", "export_rd")
-    detector, variables = zoo.deploy(detector, variables)  # the inference form: BatchNorm folded into the convs
+    # the inference form (BatchNorm folded into the convs), every conv kept a Conv node
+    detector, variables = zoo.deploy(detector, variables, for_export=True)
     cfg = detector.config
     rep = export_representation(input_hw, representation)
     specs = input_specs(cfg, input_hw, batch_size)

@@ -1,0 +1,94 @@
+"""Dense KxK convolutions as one matrix product (im2col) where XLA's CPU convolution is slow: small
+images with wide channels, as in the deep stages of Darknet-53 and YOLOv3's head. Inference only.
+
+XLA's CPU backend runs such a conv well below its matrix-product speed (a 3x3 conv from 512 to
+1024 channels on an 8 x 13 map is one 104 x 4608 by 4608 x 1024 product). Gathering the K*K
+shifted views of the padded input into (pixels, K*K*C_in) rows and multiplying by the kernel
+reshaped to (K*K*C_in, C_out) gives the same sums in another order (float rounding apart), and the
+product runs at the matrix unit's speed; on large images the K*K-fold copy costs more than it
+saves, so the conv stays XLA's there. The crossover, and the gain on whole networks, were measured
+with `python -m experiments.bn_fold_speed --grid` and `--ab products` (docs/performance.md).
+
+`product_call(call)` runs a network's apply with every conv that fits (`fits`) computed this way,
+through a flax method interceptor: nothing in the model changes, so training, parameter counts and
+the ONNX export (where the runtime picks its own algorithm) keep the plain convs. It acts on the
+CPU backend only; elsewhere the call runs as it is.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+from jax import lax
+
+from . import conv, yolo
+
+MAX_PIXELS = 512  # output pixels at or below which the product form is used ...
+MIN_CHANNELS = 128  # ... when both the input and the output are at least this wide
+
+
+def geometry(module: nn.Module, x_BxHxWxC) -> tuple[int, tuple[tuple[int, int], tuple[int, int]]] | None:
+    """(stride, ((top, bottom), (left, right)) pads) of a dense conv module with a KxK kernel,
+    K > 1, applied to x; None for any other module (a 1x1 conv is a matrix product already)."""
+    if isinstance(module, conv.Conv) and module.kernel > 1:
+        k, s = module.kernel, module.stride
+        return s, (conv.same_pads(x_BxHxWxC.shape[1], k, s), conv.same_pads(x_BxHxWxC.shape[2], k, s))
+    if isinstance(module, yolo.PaddedConv) and module.kernel > 1:
+        p = module.kernel // 2
+        return module.stride, ((p, p), (p, p))
+    return None
+
+
+def fits(x_BxHxWxC, kernel_KxKxIxO, stride: int, pads) -> bool:
+    """Whether the product form beats XLA's conv for this shape (MAX_PIXELS, MIN_CHANNELS)."""
+    (top, bottom), (left, right) = pads
+    k, _, cin, cout = kernel_KxKxIxO.shape
+    ho = (x_BxHxWxC.shape[1] + top + bottom - k) // stride + 1
+    wo = (x_BxHxWxC.shape[2] + left + right - k) // stride + 1
+    return ho * wo <= MAX_PIXELS and min(cin, cout) >= MIN_CHANNELS
+
+
+def conv_as_product(x_BxHxWxI, w_KxKxIxO, stride: int, pads):
+    """The conv of x padded by `pads` with stride `stride`, as (pixels, K*K*I) @ (K*K*I, O)."""
+    b, h, w, cin = x_BxHxWxI.shape
+    k = w_KxKxIxO.shape[0]
+    (top, bottom), (left, right) = pads
+    xp = jnp.pad(x_BxHxWxI, ((0, 0), (top, bottom), (left, right), (0, 0)))
+    ho, wo = (h + top + bottom - k) // stride + 1, (w + left + right - k) // stride + 1
+    # columns ordered (row tap, column tap, channel): the kernel's own (K, K, I) order
+    views = [lax.slice(xp, (0, i, j, 0), (b, i + stride * (ho - 1) + 1, j + stride * (wo - 1) + 1, cin),
+                       (1, stride, stride, 1)) for i in range(k) for j in range(k)]
+    return jnp.dot(jnp.concatenate(views, axis=-1), w_KxKxIxO.reshape(k * k * cin, -1))
+
+
+DENSE = (conv.Conv, yolo.PaddedConv)  # the zoo's dense conv modules; both call their input x_BxHxWxC
+
+
+def _intercept(next_fun, args, kwargs, context):
+    module = context.module
+    if context.method_name != "__call__" or not isinstance(module, DENSE):
+        return next_fun(*args, **kwargs)
+    x = args[0] if args else kwargs["x_BxHxWxC"]
+    shape = geometry(module, x)
+    kernel = module.get_variable("params", "kernel")
+    if shape is None or kernel is None or not fits(x, kernel, *shape):  # kernel None: being initialised
+        return next_fun(*args, **kwargs)
+    y = conv_as_product(x, kernel, *shape)
+    return y + module.get_variable("params", "bias") if module.use_bias else y
+
+
+def product_call(call: Callable) -> Callable:
+    """`call` (fn(variables, *args) running a flax network), with the convs that fit computed as
+    one matrix product on the CPU backend. An interceptor outside this one (bn_fold.folded_call)
+    still sees each conv's call and adds what it adds after it."""
+
+    def run(*args, **kwargs):
+        if jax.default_backend() != "cpu":
+            return call(*args, **kwargs)
+        with nn.intercept_methods(_intercept):
+            return call(*args, **kwargs)
+
+    return run
