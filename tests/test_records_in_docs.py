@@ -28,8 +28,9 @@ def test_every_figure_of_an_rd_table_record_is_on_its_page(record):
     assert shown and not shown - figures(page), sorted(shown - figures(page))
 
 
-def test_the_dsfec_ranking_study_on_its_page_is_its_records():
-    study = json.loads((ROOT / "search" / "nas" / "records" / "ranking_dsfec.json").read_text())["ranking"]
+@pytest.mark.parametrize("space", ["dsfec", "yolov8n_adapter"])
+def test_a_ranking_study_on_its_page_is_its_records(space):
+    study = json.loads((ROOT / "search" / "nas" / "records" / f"ranking_{space}.json").read_text())["ranking"]
     page = (ROOT / "docs" / "search.md").read_text()
     for pair in study["pairs"]:
         row = rf"\| {pair['inherited']:.2f} \| (\*\*)?{pair['standalone']:.2f}(\*\*)? \|"
