@@ -29,42 +29,45 @@ from . import conv, yolo
 MAX_PIXELS = 512  # output pixels at or below which the product form is used ...
 MIN_CHANNELS = 128  # ... when both the input and the output are at least this wide
 
+DENSE = (conv.Conv, yolo.PaddedConv)  # the zoo's dense conv modules; both call their input x_BxHxWxC
+
 
 def geometry(module: nn.Module, x_BxHxWxC) -> tuple[int, tuple[tuple[int, int], tuple[int, int]]] | None:
-    """(stride, ((top, bottom), (left, right)) pads) of a dense conv module with a KxK kernel,
-    K > 1, applied to x; None for any other module (a 1x1 conv is a matrix product already)."""
-    if isinstance(module, conv.Conv) and module.kernel > 1:
-        k, s = module.kernel, module.stride
+    """(stride, ((top, bottom), (left, right)) pads) of a DENSE module applied to x; None for a 1x1
+    kernel (a matrix product already)."""
+    k, s = module.kernel, module.stride
+    if k == 1:
+        return None
+    if isinstance(module, conv.Conv):  # TF 'SAME'
         return s, (conv.same_pads(x_BxHxWxC.shape[1], k, s), conv.same_pads(x_BxHxWxC.shape[2], k, s))
-    if isinstance(module, yolo.PaddedConv) and module.kernel > 1:
-        p = module.kernel // 2
-        return module.stride, ((p, p), (p, p))
-    return None
+    return s, ((k // 2, k // 2), (k // 2, k // 2))  # PaddedConv: PyTorch's k // 2
+
+
+def output_hw(x_BxHxWxC, k: int, stride: int, pads) -> tuple[int, int]:
+    """The output size of a KxK conv with `stride` of x padded by `pads`."""
+    (top, bottom), (left, right) = pads
+    return ((x_BxHxWxC.shape[1] + top + bottom - k) // stride + 1,
+            (x_BxHxWxC.shape[2] + left + right - k) // stride + 1)
 
 
 def fits(x_BxHxWxC, kernel_KxKxIxO, stride: int, pads) -> bool:
     """Whether the product form beats XLA's conv for this shape (MAX_PIXELS, MIN_CHANNELS)."""
-    (top, bottom), (left, right) = pads
     k, _, cin, cout = kernel_KxKxIxO.shape
-    ho = (x_BxHxWxC.shape[1] + top + bottom - k) // stride + 1
-    wo = (x_BxHxWxC.shape[2] + left + right - k) // stride + 1
+    ho, wo = output_hw(x_BxHxWxC, k, stride, pads)
     return ho * wo <= MAX_PIXELS and min(cin, cout) >= MIN_CHANNELS
 
 
 def conv_as_product(x_BxHxWxI, w_KxKxIxO, stride: int, pads):
     """The conv of x padded by `pads` with stride `stride`, as (pixels, K*K*I) @ (K*K*I, O)."""
-    b, h, w, cin = x_BxHxWxI.shape
+    b, _, _, cin = x_BxHxWxI.shape
     k = w_KxKxIxO.shape[0]
     (top, bottom), (left, right) = pads
     xp = jnp.pad(x_BxHxWxI, ((0, 0), (top, bottom), (left, right), (0, 0)))
-    ho, wo = (h + top + bottom - k) // stride + 1, (w + left + right - k) // stride + 1
+    ho, wo = output_hw(x_BxHxWxI, k, stride, pads)
     # columns ordered (row tap, column tap, channel): the kernel's own (K, K, I) order
     views = [lax.slice(xp, (0, i, j, 0), (b, i + stride * (ho - 1) + 1, j + stride * (wo - 1) + 1, cin),
                        (1, stride, stride, 1)) for i in range(k) for j in range(k)]
     return jnp.dot(jnp.concatenate(views, axis=-1), w_KxKxIxO.reshape(k * k * cin, -1))
-
-
-DENSE = (conv.Conv, yolo.PaddedConv)  # the zoo's dense conv modules; both call their input x_BxHxWxC
 
 
 def _intercept(next_fun, args, kwargs, context):
