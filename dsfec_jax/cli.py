@@ -52,8 +52,8 @@ def common(p: argparse.ArgumentParser, split: str) -> None:
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE", help="config override")
     p.add_argument("--data", default="synthetic",
                    help="synthetic (the family's embedded benchmark) | points: synthetic4d | vod:PATH | tj4d:PATH | "
-                        "nuscenes:DATAROOT; range-Doppler: raddet:PATH | carrada:PATH; camera: street | street:DIR | "
-                        "voc:DIR")
+                        "nuscenes:DATAROOT; range-Doppler: synthetic:v1 (the benchmark before issue 54) | raddet:PATH | "
+                        "carrada:PATH; camera: street | street:DIR | voc:DIR")
     p.add_argument("--split", default=split)
     p.add_argument("--frames", type=positive_int, default=None,
                    help="frames (RD models: samples) to use (synthetic: to generate)")

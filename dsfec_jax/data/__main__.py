@@ -3,8 +3,10 @@
 Point clouds (synthetic, nuscenes-pcd, vod, tj4d): per frame and in total, points, boxes per
 class, boxes with >= 1 point. Range-Doppler maps (rd-synthetic, ti-adc, raddet, carrada): objects
 per frame by class, box sizes in bins, the noise floor, target peaks above it, the zero-Doppler
-ridge's share of power; the generation rate (rd-synthetic) or the strongest moving target
-(ti-adc); --png DIR writes previews of both input representations. Street scenes (street, the
+ridge's share of power, the map's structure per channel count (ridge over the row floor, floor
+shape, peak; --versus SOURCE[:PATH] adds another source's beside it); the generation rate
+(rd-synthetic, --benchmark picks its version) or the strongest moving target (ti-adc); --png DIR
+writes previews of both input representations. Street scenes (street, the
 camera benchmark): objects per frame by class, difficult share, box sizes, depth range, the
 generation rate; --png DIR writes previews (image with boxes | depth | right image). For synthetic
 sources --split/--frames/--seed select the frames.
@@ -21,7 +23,8 @@ from ..argtypes import non_negative_int, positive_int
 from .points.inspect import DSFEC_SPEC, SOURCES, format_summary, load, pillarize_rate, summarize
 from .rd.colormaps import COLORMAPS
 from .rd.inspect import RD_SOURCES, inspect_rd
-from .rd.stats import format_stats_table
+from .rd.stats import format_stats_table, format_structure_table
+from .rd.synthetic.config import BENCHMARK_VERSIONS
 
 STREET = "street"
 
@@ -39,6 +42,10 @@ def parse(argv=None) -> argparse.Namespace:
     i.add_argument("--png", default=None, metavar="DIR", help="RD and street sources: write PNG previews here")
     i.add_argument("--previews", type=non_negative_int, default=3, help="RD and street sources: number of previews")
     i.add_argument("--colormap", default="viridis", choices=COLORMAPS, help="RD sources: the heatmap's colormap")
+    i.add_argument("--benchmark", type=int, default=None, choices=BENCHMARK_VERSIONS,
+                   help="rd-synthetic: the benchmark version (default the newest; 1: before issue 54's realism)")
+    i.add_argument("--versus", default=None, metavar="SOURCE[:PATH]",
+                   help="RD sources: another source's map structure beside this one's, e.g. ti-adc:DIR")
     i.add_argument("--json", action="store_true")
     return p.parse_args(argv)
 
@@ -56,10 +63,10 @@ def inspect_maps(args, argv) -> str:
     target = "" if args.source == "rd-synthetic" else args.target
     command = "python -m dsfec_jax.data " + shlex.join(sys.argv[1:] if argv is None else argv)
     summary = inspect_rd(args.source, target, split, args.frames, args.seed, args.png, args.previews, args.colormap,
-                         command)
+                         command, args.benchmark, args.versus)
     if args.json:
         return json.dumps(summary, indent=2)
-    lines = [format_stats_table({args.source: summary["stats"]})]
+    lines = [format_stats_table(summary["stats_by_channels"]), "", format_structure_table(summary["structure"]), ""]
     for key, value in summary["info"].items():
         lines.append(f"{key}: {value}")
     lines += [f"wrote {p}" for p in summary.get("previews", [])]

@@ -3,8 +3,10 @@ capture) goes through.
 
     adc (num_samples, num_chirps, num_channels) complex
       -> DC removal: subtract the mean over the samples of every chirp and channel (the
-         community RADDet ADC->RD recipe, RADDet issue 40; it removes the Tx->Rx leakage and the
-         ADC offset, which would otherwise fill range bin 0)
+         community RADDet ADC->RD recipe, RADDet issue 40; it removes the ADC's offset, which
+         would otherwise fill range bin 0). It does not remove the Tx->Rx leakage: that is a tone
+         at a small but nonzero beat frequency (about range bin 1 on the TI capture), which stays
+         the map's maximum with or without DC removal (docs/range-doppler.md measures it)
       -> window on range (samples) and on Doppler (chirps): 'hann' (default), 'hamming' or 'none'
       -> range FFT over the samples, Doppler FFT over the chirps, fftshift on Doppler
       -> antenna integration over the channels (integration.py): 'power_sum' (default, RADDet's

@@ -1,6 +1,8 @@
 """Named RD sources -> lists of RDSample, what training, evaluation and the commands read.
 
-`synthetic` (or `rd-synthetic`: the embedded FMCW benchmark, generated; splits train/val/test),
+`synthetic` (or `rd-synthetic`: the embedded FMCW benchmark, generated; splits train/val/test;
+`synthetic:v1` is the benchmark before issue 54's realism, which the shipped RD weights and their
+records were made on, `synthetic:v2` the current default),
 `raddet:PATH` (a RADDet root holding train/ and test/ split folders, or one split folder) and
 `carrada:PATH` (a CARRADA root with its sequence split file). Samples are materialised once:
 a training run visits each many times, and re-simulating a map per visit would cost the host the
@@ -15,7 +17,7 @@ from pathlib import Path
 from ...core.progress import generating
 from .sample import RDSample
 
-SOURCE_KINDS = ("synthetic", "rd-synthetic", "raddet:PATH", "carrada:PATH")
+SOURCE_KINDS = ("synthetic[:vN]", "rd-synthetic[:vN]", "raddet:PATH", "carrada:PATH")
 SYNTHETIC_SAMPLES = 200  # `synthetic` without a count
 
 
@@ -33,7 +35,8 @@ def load_rd_samples(data: str, split: str, count: int | None = None, seed: int =
         from .synthetic import SPLITS, RDSyntheticDataset
         if split not in SPLITS:
             raise NoSamples(f"--data {data}: splits are {SPLITS}, not {split!r}")
-        dataset = RDSyntheticDataset(split=split, seed=seed, num_samples=count or SYNTHETIC_SAMPLES)
+        dataset = RDSyntheticDataset(synthetic_config(data, path), split=split, seed=seed,
+                                     num_samples=count or SYNTHETIC_SAMPLES)
         return list(generating(dataset, f"generating {len(dataset)} synthetic RD maps ({split})", unit="map"))
     if kind not in ("raddet", "carrada"):
         raise ValueError(f"--data {data!r}: expected one of {', '.join(SOURCE_KINDS)}")
@@ -44,6 +47,15 @@ def load_rd_samples(data: str, split: str, count: int | None = None, seed: int =
     if not samples:
         raise NoSamples(f"--data {data}: split {split!r} holds no samples")
     return samples
+
+
+def synthetic_config(data: str, version: str):
+    """The benchmark config of `synthetic[:vN]` ('' for the newest)."""
+    from .synthetic.config import BENCHMARK_VERSIONS, benchmark_config
+    known = [f"v{v}" for v in BENCHMARK_VERSIONS]
+    if version and version not in known:
+        raise ValueError(f"--data {data!r}: the synthetic benchmark versions are {known}")
+    return benchmark_config(int(version[1:]) if version else BENCHMARK_VERSIONS[-1])
 
 
 def _real(kind: str, path: Path, split: str):

@@ -8,6 +8,13 @@ Per frame:
 - zero-Doppler ridge share: linear power in the zero-velocity column and its `ridge_bins`
   neighbours on each side, over the map's total linear power (a Hann window spreads a static
   return over +-1 column, hence ridge_bins=1 by default);
+- map structure (`structure_stats`, dB, for log-power maps): each range row's floor is the median
+  over its Doppler columns; the zero-Doppler ridge's excess is the zero-velocity column over its
+  row's floor (its median over rows, and the rows where it reaches RIDGE_STRONG_DB); the floor's
+  std across rows; its shape: near rows (5-25 % of the range) and the last 5 % of rows against the
+  far rows (70-90 %), where an IF high-pass and the anti-alias low-pass show; the map's maximum
+  (on real data the Tx->Rx leakage) and its 99th percentile over the median. Rows before
+  SKIP_ROWS (range bin 0, which DC removal empties) are left out;
 per box:
 - size in bins (range rows, Doppler columns), and the peak above the floor: the map's maximum
   inside the box minus the frame's floor, in dB.
@@ -26,6 +33,11 @@ from .classes import RD_CLASSES
 from .sample import RDSample
 
 MAD_TO_SD = 1.4826  # robust sd of a Gaussian from its median absolute deviation
+RIDGE_STRONG_DB = 30.0  # a row's ridge counts as strong at this excess over the row's floor
+SKIP_ROWS = 1  # range bin 0: DC removal empties it, so its floor says nothing about the IF chain
+NEAR_ROWS, FAR_ROWS, EDGE_ROWS = (0.05, 0.25), (0.70, 0.90), (0.95, 1.0)  # fractions of the range rows
+STRUCTURE_KEYS = ("ridge_excess_db", "strong_ridge_rows", "floor_std_db", "near_minus_far_db",
+                  "edge_minus_far_db", "max_minus_median_db", "p99_minus_median_db")
 
 
 def db_per_unit(scale: str) -> float | None:
@@ -55,6 +67,32 @@ def zero_doppler_share(sample: RDSample, ridge_bins: int = 1) -> float | None:
     cols = np.abs(np.arange(lin.shape[1]) - zero) <= ridge_bins
     total = float(lin.sum())
     return float(lin[:, cols].sum() / total) if total > 0 else 0.0
+
+
+def _band(floors: np.ndarray, fractions: tuple[float, float]) -> float:
+    n = len(floors)
+    lo, hi = int(round(fractions[0] * n)), max(int(round(fractions[1] * n)), int(round(fractions[0] * n)) + 1)
+    return float(np.median(floors[lo:hi]))
+
+
+def structure_stats(sample: RDSample) -> dict | None:
+    """The map's structure in dB (module docstring): ridge, floor shape, peak; None for a
+    'normalised' map, which is no log-power."""
+    per_db = db_per_unit(sample.scale)
+    if per_db is None:
+        return None
+    power = np.asarray(sample.power, np.float64) * per_db
+    rows = power[SKIP_ROWS:]
+    floors = np.median(rows, axis=1)
+    zero = int(np.argmin(np.abs(sample.axes.velocity_mps)))
+    excess = rows[:, zero] - floors
+    far = _band(floors, FAR_ROWS)
+    median = float(np.median(power))
+    return dict(ridge_excess_db=float(np.median(excess)), strong_ridge_rows=int(np.sum(excess >= RIDGE_STRONG_DB)),
+                rows=int(len(rows)), floor_std_db=float(np.std(floors)),
+                near_minus_far_db=_band(floors, NEAR_ROWS) - far, edge_minus_far_db=_band(floors, EDGE_ROWS) - far,
+                max_minus_median_db=float(power.max()) - median,
+                p99_minus_median_db=float(np.percentile(power, 99)) - median)
 
 
 def box_peaks_db(sample: RDSample, floor: float) -> np.ndarray:
@@ -156,13 +194,52 @@ def stats_rows(s: dict) -> list[tuple[str, str]]:
 def format_stats_table(named: dict[str, dict]) -> str:
     """Several sources side by side: {'rd-synthetic val': stats, 'ti-adc': stats} -> text table."""
     columns = {name: dict(stats_rows(s)) for name, s in named.items()}
-    labels = list(dict.fromkeys(label for s in named.values() for label, _ in stats_rows(s)))
+    return _side_by_side(columns, list(dict.fromkeys(label for s in named.values() for label, _ in stats_rows(s))))
+
+
+def _side_by_side(columns: dict[str, dict[str, str]], labels: list[str]) -> str:
+    """A text table: one row per label, one column per source ('-' where a source has no value)."""
     width = max(map(len, labels)) + 2
     cols = [max(len(name), *(len(c.get(label, "-")) for label in labels)) + 2 for name, c in columns.items()]
     lines = [" " * width + "".join(f"{name:>{w}}" for name, w in zip(columns, cols))]
     for label in labels:
         lines.append(f"{label:<{width}}" + "".join(f"{c.get(label, '-'):>{w}}" for c, w in zip(columns.values(), cols)))
     return "\n".join(lines)
+
+
+def structure_summary(samples: Iterable[RDSample]) -> dict | None:
+    """p10 / median / p90 over maps of each `structure_stats` figure (None: no log-power map)."""
+    per_map = [x for x in map(structure_stats, samples) if x is not None]
+    if not per_map:
+        return None
+    out = {key: _summary([m[key] for m in per_map]) for key in STRUCTURE_KEYS}
+    out["rows"] = int(np.median([m["rows"] for m in per_map]))
+    return out
+
+
+STRUCTURE_LABELS = {
+    "ridge_excess_db": "zero-Doppler ridge over row floor, median row (dB)",
+    "strong_ridge_rows": f"rows with ridge >= {RIDGE_STRONG_DB:.0f} dB over floor",
+    "floor_std_db": "floor std across rows (dB)",
+    "near_minus_far_db": "floor near (5-25 %) - far (70-90 %) (dB)",
+    "edge_minus_far_db": "floor last 5 % of rows - far (dB)",
+    "max_minus_median_db": "map max - median (dB)",
+    "p99_minus_median_db": "p99 - median (dB)",
+}
+
+
+def format_structure_table(named: dict[str, dict | None]) -> str:
+    """Map structure of several sources side by side: medians with [p10, p90] over maps (a single
+    map shows its value); the ridge row count says of how many rows."""
+    columns = {name: {} if s is None else {label: _structure_cell(s, key) for key, label in STRUCTURE_LABELS.items()}
+               for name, s in named.items()}
+    return _side_by_side(columns, list(STRUCTURE_LABELS.values()))
+
+
+def _structure_cell(s: dict, key: str) -> str:
+    x, digits = s[key], 0 if key == "strong_ridge_rows" else 1
+    value = f"{x['median']:.{digits}f}" if x["count"] == 1 else _fmt(x, digits=digits)
+    return value + (f" of {s['rows']}" if key == "strong_ridge_rows" else "")
 
 
 def generation_rate(make, count: int = 100) -> float:

@@ -8,6 +8,9 @@ import pytest
 
 from dsfec_jax.core.png import PNG_SIGNATURE
 from dsfec_jax.data.__main__ import main
+from dsfec_jax.data.rd.sources import load_rd_samples
+from dsfec_jax.data.rd.synthetic import generate_sample
+from dsfec_jax.data.rd.synthetic.config import benchmark_config
 
 
 def test_inspect_rd_synthetic_prints_statistics_and_writes_previews(tmp_path, capsys):
@@ -27,6 +30,25 @@ def test_inspect_ti_capture_finds_the_approaching_target(shared_data, capsys):
     assert main(["inspect", "--source", "ti-adc", str(capture), "--json"]) == 0
     target = json.loads(capsys.readouterr().out)["info"]["targets"]["ti-adc/simple_frame_1"]
     assert target["range_bin"] == 41 and target["approaching"] and target["range_m"] == pytest.approx(2.0, abs=0.05)
+
+
+def test_inspect_sets_the_map_structure_beside_the_capture_per_channel_count(shared_data, capsys):
+    capture = shared_data / "openradar_ti_adc"
+    assert main(["inspect", "--source", "rd-synthetic", "--frames", "2", "--benchmark", "1",
+                 "--versus", f"ti-adc:{capture}"]) == 0
+    out = capsys.readouterr().out
+    header = next(line for line in out.splitlines() if "ti-adc 1ch" in line)
+    assert header.split() == ["rd-synthetic", "8ch", "ti-adc", "1ch", "ti-adc", "8ch"]  # never pooled
+    ridge = next(line for line in out.splitlines() if line.startswith("rows with ridge"))
+    assert ridge.endswith("49 of 127   45 of 127") and "benchmark: 1" in out
+    floor = next(line for line in out.splitlines() if line.startswith("noise floor (dB)"))
+    assert floor.endswith("48.2 (robust sd 5.68)    59.2 (robust sd 2.23)")  # one channel, eight
+    with pytest.raises(SystemExit, match="SOURCE:PATH"):
+        main(["inspect", "--source", "rd-synthetic", "--frames", "1", "--versus", "ti-adc"])
+    with pytest.raises(ValueError, match="versions"):
+        load_rd_samples("synthetic:v9", "val", 1)
+    old = load_rd_samples("synthetic:v1", "val", 1)[0].power
+    np.testing.assert_array_equal(old, generate_sample(benchmark_config(1), "val", 0).power)
 
 
 def test_inspect_rd_needs_a_path_for_real_sources():

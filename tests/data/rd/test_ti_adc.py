@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dsfec_jax.data.rd.processing import RDProcessing
-from dsfec_jax.data.rd.stats import dataset_stats, format_stats_table
+from dsfec_jax.data.rd.stats import dataset_stats, format_stats_table, structure_stats
 from dsfec_jax.data.rd.ti_adc import (CAPTURES, RANGE_RESOLUTION_M, VELOCITY_RESOLUTION_MPS, find_capture,
                                       load_ti_sample, read_ti_adc, strongest_moving_target, ti_sensor)
 
@@ -50,6 +50,20 @@ def test_eight_channel_capture_and_statistics_without_boxes():
     assert "ti" in format_stats_table({"ti": stats})
     hamming = load_ti_sample(TI_DIR, processing=RDProcessing(window="hamming", integration="log_sum"))
     assert hamming.scale == "normalised" and strongest_moving_target(hamming)["peak_db_above_floor"] is None
+
+
+def test_map_structure_of_the_capture():
+    """The figures the RD benchmark's v2 is measured against (docs/range-doppler.md): a zero-Doppler
+    ridge at every range, the IF chain's floor shape, the Tx->Rx leakage as the map's maximum."""
+    eight = structure_stats(load_ti_sample(TI_DIR, "doppler_example_1.npy"))
+    assert eight["ridge_excess_db"] == pytest.approx(27.96, abs=0.05) and eight["strong_ridge_rows"] == 45
+    assert eight["rows"] == 127 and eight["floor_std_db"] == pytest.approx(2.08, abs=0.01)
+    assert eight["near_minus_far_db"] == pytest.approx(-1.51, abs=0.01)
+    assert eight["edge_minus_far_db"] == pytest.approx(-8.03, abs=0.01)
+    assert eight["max_minus_median_db"] == pytest.approx(55.88, abs=0.01)
+    assert eight["p99_minus_median_db"] == pytest.approx(27.48, abs=0.01)
+    one = structure_stats(load_ti_sample(TI_DIR))
+    assert one["strong_ridge_rows"] == 49 and one["max_minus_median_db"] == pytest.approx(56.97, abs=0.01)
 
 
 def test_unsigned_words_are_read_as_int16(tmp_path):

@@ -16,6 +16,22 @@ Sources and assumptions (reference-spec §4; ../shared/docs/rd-yolo-camera-facts
   map over the chain's noise gain, ~6.5 counts in both files). The radar equation gives each
   scatterer's SNR against kT B NF (FMCWSensor.noise_power_dbm); counts = noise_counts_rms *
   sqrt(SNR), so maps sit on the same log10 scale as a real TI capture.
+- Benchmark versions (issue 54): v1 is the benchmark before the realism below (the shipped RD
+  weights and their records were made on it; `benchmark_config(1)` regenerates its samples
+  exactly); v2, the default, adds static clutter at every range, the IF chain's shape and the
+  Tx->Rx coupling, each measured against the TI capture through the same chain (the capture is
+  an indoor scene of another radar, so the mechanisms are matched, not the room):
+  * IFChain (if_chain.py): high-pass corner, its noise share, low-pass corner, order and stop
+    band are the least-squares fit of the capture's floor profile over range, and the coupling's
+    fractional bin and level per ADC sample the fit of its leakage rows, both by
+    `python -m experiments.rd_capture_fit` (experiments/records/rd_synthetic/capture_fit.json;
+    the coupling is the mean of its two files). The low-pass corner lands on TI's 0.9 F_s rule.
+  * area clutter and point reflectors (ClutterConfig): assumed forms (beam-limited clutter,
+    sigma0 R fov dR per range bin; Poisson poles with log-normal RCS), whose levels (sigma0, its
+    per-frame and per-scatterer spread, the reflectors' RCS) were set so that 300 v2 validation
+    maps give the capture's zero-Doppler ridge over the row floor and the share of rows where it
+    reaches 30 dB (docs/range-doppler.md: `inspect --versus` prints both). sigma0 here stands for
+    everything static in a street (road, kerbs, walls, vegetation, fences), not a bare road's.
 """
 
 from __future__ import annotations
@@ -25,8 +41,10 @@ import dataclasses
 from ..classes import RD_CLASSES
 from ..processing import RDProcessing
 from ..sensor import RADDET_SENSOR, FMCWSensor
+from .if_chain import NO_IF_CHAIN, IFChain
 
-FORMAT_VERSION = 1  # bump when generated samples change for the same (config, split, index, seed)
+FORMAT_VERSION = 2  # bump when generated samples change for the same (config, split, index, seed)
+BENCHMARK_VERSIONS = (1, 2)  # 1: the benchmark the shipped RD weights were trained on; 2: issue 54's realism
 MICRO_MOTIONS = ("none", "gait", "wheels")
 
 # Vehicle aspect pattern g(b) = B cos b + C cos 2b through 3GPP's front (b = 0) 15.5, rear 14.6 and
@@ -86,6 +104,22 @@ class ClutterConfig:
     ghost_prob: float = 0.3                   # per moving object: a multipath copy
     ghost_extra_range_m: tuple[float, float] = (1.0, 6.0)  # longer path, same Doppler
     ghost_loss_db: tuple[float, float] = (8.0, 15.0)
+    # benchmark v2 (scatterers.static_scene_scatterers); 0 cells / 0 poles: off (v1)
+    area_cells_per_bin: float = 2.0           # area clutter scatterers per range bin
+    area_min_range_m: float = 0.5             # where the ground enters the beam
+    area_sigma0_db: float = -5.0              # per-frame sigma0 ~ N(this, sd) dB (m^2 per m^2)
+    area_sigma0_sd_db: float = 3.0
+    area_texture_sd_db: float = 3.0           # per-scatterer log-normal texture
+    poles: float = 5.0                        # Poisson mean: poles, signs, posts
+    pole_rcs_dbsm: float = 10.0               # per reflector ~ N(this, sd) dB
+    pole_rcs_sd_db: float = 5.0
+
+    def __post_init__(self):
+        if self.area_cells_per_bin < 0 or self.poles < 0 or self.area_min_range_m <= 0:
+            raise ValueError(f"ClutterConfig: area_cells_per_bin={self.area_cells_per_bin} and poles={self.poles} "
+                             f"must be >= 0, area_min_range_m={self.area_min_range_m} > 0")
+        if min(self.area_sigma0_sd_db, self.area_texture_sd_db, self.pole_rcs_sd_db) < 0:
+            raise ValueError("ClutterConfig: area_sigma0_sd_db, area_texture_sd_db and pole_rcs_sd_db must be >= 0")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,6 +138,7 @@ class RDSyntheticConfig:
     max_range_fraction: float = 0.9           # of sensor.max_range_m: TI's IF-filter rule (0.9 F_s)
     fov_deg: float = 120.0                    # azimuth field of view, centred on boresight
     clutter: ClutterConfig = ClutterConfig()
+    if_chain: IFChain = IFChain()              # the IF filters' shape and the Tx->Rx coupling (if_chain.py)
     body_interior_share: float = 0.5          # body scatterers anywhere on the footprint; the rest on
     #                                           the faces that face the radar (scatterers.body_points)
     noise_counts_rms: float = 6.5             # thermal noise per complex ADC sample, ADC counts
@@ -145,8 +180,22 @@ class RDSyntheticConfig:
         d["sensor"] = FMCWSensor(**d["sensor"])
         d["processing"] = RDProcessing(**d["processing"])
         d["clutter"] = ClutterConfig(**d["clutter"])
+        d["if_chain"] = IFChain(**d["if_chain"])
         d["profiles"] = tuple(ClassProfile(**p) for p in d["profiles"])
         return cls(**d)
+
+
+def benchmark_config(version: int = BENCHMARK_VERSIONS[-1]) -> RDSyntheticConfig:
+    """The benchmark's config by version: 2 is the default config; 1 has no area clutter, no point
+    reflectors, a flat IF chain and no coupling, and generates exactly the samples it did before
+    issue 54 (what the shipped RD weights and their records were made on)."""
+    if version not in BENCHMARK_VERSIONS:
+        raise ValueError(f"RD synthetic benchmark version {version!r}; known: {BENCHMARK_VERSIONS}")
+    cfg = RDSyntheticConfig()
+    if version == 1:
+        clutter = dataclasses.replace(cfg.clutter, area_cells_per_bin=0.0, poles=0.0)
+        cfg = dataclasses.replace(cfg, clutter=clutter, if_chain=NO_IF_CHAIN)
+    return cfg
 
 
 def _tuples(v):

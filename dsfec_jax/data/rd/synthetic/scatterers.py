@@ -15,7 +15,13 @@
   contact, 2 v on top). Within one frame (a few ms) these speeds are constant, so limbs and
   wheels spread over Doppler bins, not over time.
 - Static clutter (velocity exactly 0: a static sensor): ground patches, building facades (lines
-  of scatterers) and parked vehicles (car layouts); never labelled.
+  of scatterers) and parked vehicles (car layouts); never labelled. Benchmark v2 adds area
+  clutter at every range and strong point reflectors (`static_scene_scatterers`): the area
+  clutter of a range bin is sigma0 times the patch the field of view cuts from it, R fov dR, so
+  its power falls as R^-3 where a point target's falls as R^-4 (beam-limited clutter), split over
+  `area_cells_per_bin` scatterers with a log-normal texture (their random phases give the
+  speckle) and a per-frame sigma0 (an open road against a street lined with walls and kerbs);
+  poles, signs and posts are single strong scatterers at random ranges.
 - Multipath ghosts: a copy of a moving object's scatterers at a longer path (range + 1..6 m), the
   same Doppler, another azimuth, 8..15 dB weaker; never labelled.
 RCS is split over an object's scatterers (weights sum to 1), so the object's total follows the
@@ -178,6 +184,38 @@ def clutter_scatterers(rng: np.random.Generator, cfg: RDSyntheticConfig) -> Scat
         total = 10 ** (sample_rcs_dbsm(rng, car) / 10)
         parts.append(Scatterers.from_points(rng, xy, np.zeros_like(xy), total * weights / weights.sum()))
     return Scatterers.concat(parts)
+
+
+def area_clutter(rng: np.random.Generator, cfg: RDSyntheticConfig) -> Scatterers:
+    """Beam-limited area clutter from area_min_range_m to max_range_m: RCS sigma0 R fov dR per range
+    bin, area_cells_per_bin scatterers per bin (module docstring)."""
+    c, sensor = cfg.clutter, cfg.sensor
+    near, far = min(c.area_min_range_m, cfg.max_range_m), cfg.max_range_m
+    n = int(round(c.area_cells_per_bin * (far - near) / sensor.range_resolution_m))
+    if n < 1:
+        return Scatterers.empty()
+    fov = math.radians(cfg.fov_deg)
+    xy = _uniform_points(rng, n, near, far, fov / 2)
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    sigma0_db = c.area_sigma0_db + c.area_sigma0_sd_db * rng.standard_normal()
+    texture_db = c.area_texture_sd_db * rng.standard_normal(n)
+    patch_m2 = r * fov * sensor.range_resolution_m / c.area_cells_per_bin
+    return Scatterers.from_points(rng, xy, np.zeros_like(xy), patch_m2 * 10 ** ((sigma0_db + texture_db) / 10))
+
+
+def point_reflectors(rng: np.random.Generator, cfg: RDSyntheticConfig) -> Scatterers:
+    """Poles, signs and posts: Poisson(poles) single scatterers, uniform over the scene."""
+    c = cfg.clutter
+    n = rng.poisson(c.poles)
+    xy = _uniform_points(rng, n, cfg.min_range_m, cfg.max_range_m, math.radians(cfg.fov_deg / 2))
+    rcs = 10 ** ((c.pole_rcs_dbsm + c.pole_rcs_sd_db * rng.standard_normal(n)) / 10)
+    return Scatterers.from_points(rng, xy, np.zeros_like(xy), rcs)
+
+
+def static_scene_scatterers(rng: np.random.Generator, cfg: RDSyntheticConfig) -> Scatterers:
+    """Benchmark v2's static scene on top of `clutter_scatterers`: area clutter and point reflectors.
+    Nothing is drawn for a mechanism that is off, so benchmark v1's samples stay as they were."""
+    return Scatterers.concat([area_clutter(rng, cfg), point_reflectors(rng, cfg)])
 
 
 def ghost_of(rng: np.random.Generator, s: Scatterers, cfg: RDSyntheticConfig) -> Scatterers:

@@ -2,11 +2,14 @@
 integration -> RD map, with boxes from each object's own extent (boxes.py).
 
 Order of random draws (fixed, so a sample is a pure function of its generator): actors, then
-per actor its scatterers, clutter, ghosts, and last the noise.
+per actor its scatterers, clutter, ghosts, benchmark v2's static scene (area clutter, point
+reflectors: nothing drawn when they are off, so v1's samples are unchanged), and last the noise.
+The Tx->Rx coupling draws nothing: its phase is the device's, fixed.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -15,11 +18,13 @@ from ....boxes.boxes2d import Boxes2D
 from ....core.blas import single_threaded_blas
 from ..processing import noise_floor_gain, spectra_to_rd
 from ..sample import RDAxes, RDSample
+from ..sensor import FMCWSensor
 from .boxes import extent_boxes
 from .config import RDSyntheticConfig
-from .scatterers import Scatterers, clutter_scatterers, ghost_of, object_scatterers
+from .if_chain import IFChain
+from .scatterers import Scatterers, clutter_scatterers, ghost_of, object_scatterers, static_scene_scatterers
 from .scene import Actor, sample_actors
-from .spectra import SpectralFactors, add_processed_noise, add_static_spectra, white_spectrum
+from .spectra import SpectralFactors, add_processed_noise, add_static_spectra, fast_time_cycles, snr_db, white_spectrum
 
 
 @functools.lru_cache(maxsize=8)
@@ -28,6 +33,18 @@ def mean_floor_power(cfg: RDSyntheticConfig) -> float:
     exact expectation; cells away from range bin 0 all have it)."""
     gain = noise_floor_gain(cfg.sensor, cfg.processing)
     return float(cfg.sensor.num_channels * cfg.noise_counts_rms ** 2 * np.median(gain))
+
+
+def coupling_scatterer(if_chain: IFChain, sensor: FMCWSensor) -> Scatterers:
+    """The Tx->Rx coupling as a static scatterer at coupling_bin whose RCS gives coupling_snr_db per
+    ADC sample after the IF chain (phase 0, boresight); empty without coupling."""
+    if if_chain.coupling_snr_db is None:
+        return Scatterers.empty()
+    one = np.ones(1)
+    unit = Scatterers(np.array([if_chain.coupling_bin * sensor.range_resolution_m]), 0 * one, 0 * one, one, 0 * one)
+    gain_db = 20 * np.log10(np.maximum(if_chain.tone_gain(fast_time_cycles(unit, sensor)), 1e-15))
+    rcs = 10 ** ((if_chain.coupling_snr_db - snr_db(unit, sensor) - gain_db) / 10)
+    return dataclasses.replace(unit, rcs_m2=rcs)
 
 
 def object_boxes(factors: SpectralFactors, members: slice, s: Scatterers, cfg: RDSyntheticConfig) -> list[tuple]:
@@ -48,11 +65,13 @@ def render(rng: np.random.Generator, cfg: RDSyntheticConfig, actors: list[Actor]
     per_actor = [object_scatterers(rng, a, cfg.profile(a.name), cfg.body_interior_share) for a in actors]
     static = clutter_scatterers(rng, cfg)
     ghosts = [ghost_of(rng, s, cfg) for s in per_actor if rng.random() < cfg.clutter.ghost_prob]
+    static = Scatterers.concat([static, static_scene_scatterers(rng, cfg), coupling_scatterer(cfg.if_chain, cfg.sensor)])
     moving = Scatterers.concat(per_actor + ghosts)
-    factors = SpectralFactors.of(moving, cfg.sensor, cfg.processing, cfg.noise_counts_rms, dtype)
+    chain = cfg.if_chain
+    factors = SpectralFactors.of(moving, cfg.sensor, cfg.processing, cfg.noise_counts_rms, dtype, chain)
     spectra = factors.spectra()
-    add_static_spectra(spectra, static, cfg.sensor, cfg.processing, cfg.noise_counts_rms)
-    add_processed_noise(spectra, white_spectrum(rng, cfg.sensor, cfg.noise_counts_rms, dtype), cfg.processing)
+    add_static_spectra(spectra, static, cfg.sensor, cfg.processing, cfg.noise_counts_rms, chain)
+    add_processed_noise(spectra, white_spectrum(rng, cfg.sensor, cfg.noise_counts_rms, dtype), cfg.processing, chain)
     boxes, names, owner = [], [], []
     start = 0
     for i, (a, s) in enumerate(zip(actors, per_actor)):

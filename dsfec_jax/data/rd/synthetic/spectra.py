@@ -11,6 +11,8 @@ after Tx 0, so the channels of the second Tx see the Doppler phase of that delay
 ULA spacing in wavelengths. The amplitude a_i = noise_counts_rms sqrt(SNR_i) in ADC counts, with
 SNR_i = P_r / (kT B NF) per sample from the radar equation
     P_r = P_t G_t G_r lambda^2 sigma / ((4 pi)^3 R^4 L).
+The IF chain (if_chain.py) scales a_i by its steady-state gain at the scatterer's beat frequency
+and shapes the noise per range bin; the Tx->Rx coupling is one more static scatterer.
 Range migration within a frame is ignored: R is fixed for the frame's 64 x 2 x 36 us = 4.6 ms,
 over which 13.4 m/s moves a target 6 cm, a third of a 0.195 m range bin (the fast-time Doppler
 term f_D n / F_s, which is even smaller, is kept).
@@ -22,7 +24,7 @@ and D_i = doppler_transform(d_i), two 1-D transforms. The cube is the sum over s
 X = R^T (D (x) g), one matrix product (N x K) @ (K x M C). Static scatterers (v = 0) share one
 Doppler response D_0, so their part is (R^T g) (x) D_0, which is nonzero only where D_0 is (three
 columns for Hann or Hamming, one for no window). tests/data/rd/test_rd_synthetic.py checks the
-result against a brute-force time-domain simulation and the chain.
+result against a brute-force time-domain simulation and the chain, with and without the IF chain.
 
 Noise: white circular complex Gaussian ADC noise n (E|n|^2 = sigma^2) has an unnormalised 2-D DFT
 W that is again white circular Gaussian with E|W|^2 = N M sigma^2 (the DFT over N M points is
@@ -31,8 +33,9 @@ polar method, `complex_gaussian`); then the chain's steps are applied in the fre
 DC removal zeros range bin 0 (the mean over samples is bin 0 of the range DFT), each periodic
 cosine window is the 3-tap circular convolution of processing.window_spectrum, then the Doppler
 fftshift. This equals the chain run on the ADC noise ifft2(W) to float rounding (tested), and
-costs a 3-tap stencil per axis instead of two FFTs over the whole cube. Drawing the noise is
-still the largest single cost of a sample.
+costs a 3-tap stencil per axis instead of two FFTs over the whole cube. The IF chain's noise
+shaping multiplies W by a gain per range bin first (the ADC noise is then ifft2 of that product).
+Drawing the noise is still the largest single cost of a sample.
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ import numpy as np
 
 from ..processing import RDProcessing, doppler_transform, range_transform, window_spectrum
 from ..sensor import SPEED_OF_LIGHT, FMCWSensor
+from .if_chain import NO_IF_CHAIN, IFChain
 from .scatterers import Scatterers
 
 FOUR_PI_CUBED_DB = 30 * math.log10(4 * math.pi)
@@ -57,8 +61,11 @@ def snr_db(s: Scatterers, sensor: FMCWSensor) -> np.ndarray:
     return received_dbm - sensor.noise_power_dbm
 
 
-def complex_amplitudes(s: Scatterers, sensor: FMCWSensor, noise_counts_rms: float) -> np.ndarray:
-    return noise_counts_rms * np.power(10.0, snr_db(s, sensor) / 20) * np.exp(1j * s.phase_rad)
+def complex_amplitudes(s: Scatterers, sensor: FMCWSensor, noise_counts_rms: float,
+                       if_chain: IFChain = NO_IF_CHAIN) -> np.ndarray:
+    """In ADC counts, after the IF chain's steady-state gain at each scatterer's beat frequency."""
+    a = noise_counts_rms * np.power(10.0, snr_db(s, sensor) / 20) * np.exp(1j * s.phase_rad)
+    return a if if_chain.is_flat else a * if_chain.tone_gain(fast_time_cycles(s, sensor))
 
 
 def doppler_hz(s: Scatterers, sensor: FMCWSensor) -> np.ndarray:
@@ -90,13 +97,14 @@ def doppler_factors(s: Scatterers, sensor: FMCWSensor, processing: RDProcessing)
     return doppler_transform(tones(cycles, sensor.num_chirps), processing, axis=1)
 
 
-def channel_factors(s: Scatterers, sensor: FMCWSensor, noise_counts_rms: float) -> np.ndarray:
+def channel_factors(s: Scatterers, sensor: FMCWSensor, noise_counts_rms: float,
+                    if_chain: IFChain = NO_IF_CHAIN) -> np.ndarray:
     """a_i g_i[c] (K, num_channels): amplitude, angle phase on the virtual ULA, TDM Doppler phase."""
     c = np.arange(sensor.num_channels)
     tx = c // sensor.num_rx
     spatial = 2 * np.pi * sensor.antenna_spacing_wavelengths * np.outer(np.sin(s.azimuth_rad), c)
     tdm = 2 * np.pi * np.outer(doppler_hz(s, sensor) * sensor.chirp_interval_s, tx)
-    return complex_amplitudes(s, sensor, noise_counts_rms)[:, None] * np.exp(1j * (spatial + tdm))
+    return complex_amplitudes(s, sensor, noise_counts_rms, if_chain)[:, None] * np.exp(1j * (spatial + tdm))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,10 +116,10 @@ class SpectralFactors:
 
     @classmethod
     def of(cls, s: Scatterers, sensor: FMCWSensor, processing: RDProcessing, noise_counts_rms: float,
-           dtype=np.complex64) -> "SpectralFactors":
+           dtype=np.complex64, if_chain: IFChain = NO_IF_CHAIN) -> "SpectralFactors":
         m, c = sensor.num_chirps, sensor.num_channels
         d = doppler_factors(s, sensor, processing)
-        dg = d[:, :, None] * channel_factors(s, sensor, noise_counts_rms)[:, None, :]
+        dg = d[:, :, None] * channel_factors(s, sensor, noise_counts_rms, if_chain)[:, None, :]
         return cls(range_factors(s, sensor, processing).astype(dtype), dg.reshape(len(s), m * c).astype(dtype),
                    (sensor.num_samples, m, c))
 
@@ -123,13 +131,13 @@ class SpectralFactors:
 
 
 def moving_spectra(s: Scatterers, sensor: FMCWSensor, processing: RDProcessing, noise_counts_rms: float,
-                   rows: slice = slice(None), dtype=np.complex64) -> np.ndarray:
+                   rows: slice = slice(None), dtype=np.complex64, if_chain: IFChain = NO_IF_CHAIN) -> np.ndarray:
     """Sum over scatterers of R_i[k] D_i[l] a_i g_i[c] for range bins `rows`: (rows, M, C)."""
-    return SpectralFactors.of(s, sensor, processing, noise_counts_rms, dtype).spectra(rows)
+    return SpectralFactors.of(s, sensor, processing, noise_counts_rms, dtype, if_chain).spectra(rows)
 
 
 def add_static_spectra(out: np.ndarray, s: Scatterers, sensor: FMCWSensor, processing: RDProcessing,
-                       noise_counts_rms: float) -> np.ndarray:
+                       noise_counts_rms: float, if_chain: IFChain = NO_IF_CHAIN) -> np.ndarray:
     """out += spectra of zero-velocity scatterers, (range_transform(sum_i tone_i g_i)) (x) D_0, on
     the columns where D_0 != 0. The range transform is linear, so the scatterers are summed in
     fast time first: one transform of (N, C) instead of one per scatterer."""
@@ -139,7 +147,8 @@ def add_static_spectra(out: np.ndarray, s: Scatterers, sensor: FMCWSensor, proce
         raise ValueError("add_static_spectra: every scatterer must have velocity 0")
     d0 = doppler_factors(s.select(slice(0, 1)), sensor, processing)[0]
     cols = np.flatnonzero(np.abs(d0) > 1e-9 * np.abs(d0).max())  # exactly zero elsewhere, up to rounding
-    fast = tones(fast_time_cycles(s, sensor), sensor.num_samples).T @ channel_factors(s, sensor, noise_counts_rms)
+    fast = (tones(fast_time_cycles(s, sensor), sensor.num_samples).T
+            @ channel_factors(s, sensor, noise_counts_rms, if_chain))
     a = range_transform(fast, processing, axis=0)  # (N, C)
     out[:, cols, :] += (a[:, None, :] * d0[None, cols, None]).astype(out.dtype)
     return out
@@ -181,10 +190,14 @@ def white_spectrum(rng: np.random.Generator, sensor: FMCWSensor, noise_counts_rm
     return complex_gaussian(rng, (n, m, c), noise_counts_rms * math.sqrt(n * m), dtype)
 
 
-def add_processed_noise(out: np.ndarray, white: np.ndarray, processing: RDProcessing) -> np.ndarray:
+def add_processed_noise(out: np.ndarray, white: np.ndarray, processing: RDProcessing,
+                        if_chain: IFChain = NO_IF_CHAIN) -> np.ndarray:
     """out += the chain's spectra of the ADC noise whose unnormalised 2-D DFT is `white` (which is
-    overwritten): DC removal zeros range bin 0, the windows are 3-tap circular convolutions, and
-    the Doppler fftshift is folded into the addition."""
+    overwritten) shaped by the IF chain (if_chain.py: a gain per range bin of that DFT): DC removal
+    zeros range bin 0, the windows are 3-tap circular convolutions, and the Doppler fftshift is
+    folded into the addition."""
+    if not if_chain.is_flat:
+        white *= np.sqrt(if_chain.noise_power_profile(white.shape[0])).astype(white.real.dtype)[:, None, None]
     if processing.dc_removal:
         white[0] = 0
     scratch = np.empty_like(white)
@@ -197,22 +210,23 @@ def add_processed_noise(out: np.ndarray, white: np.ndarray, processing: RDProces
     return out
 
 
-def processed_noise(white: np.ndarray, processing: RDProcessing) -> np.ndarray:
+def processed_noise(white: np.ndarray, processing: RDProcessing, if_chain: IFChain = NO_IF_CHAIN) -> np.ndarray:
     """The chain's spectra of the ADC noise whose unnormalised 2-D DFT is `white` (overwritten)."""
-    return add_processed_noise(np.zeros_like(white), white, processing)
+    return add_processed_noise(np.zeros_like(white), white, processing, if_chain)
 
 
-def adc_cube(s: Scatterers, sensor: FMCWSensor, noise_counts_rms: float) -> np.ndarray:
+def adc_cube(s: Scatterers, sensor: FMCWSensor, noise_counts_rms: float, if_chain: IFChain = NO_IF_CHAIN) -> np.ndarray:
     """Brute-force time-domain ADC cube (num_samples, num_chirps, num_channels) complex128 of the
-    scatterers, noise-free, written from physical times: for tests on tiny sensors and for anyone
-    who wants the raw cube (it costs K N M C complex exponentials)."""
+    scatterers, noise-free, written from physical times (each tone scaled by the IF chain's
+    steady-state gain at its beat frequency): for tests on tiny sensors and for anyone who wants
+    the raw cube (it costs K N M C complex exponentials)."""
     n, m, ch = sensor.num_samples, sensor.num_chirps, sensor.num_channels
     t_fast = np.arange(n)[:, None, None] / sensor.sample_rate_hz
     tx = (np.arange(ch) // sensor.num_rx)[None, None, :]
     t_chirp = (np.arange(m)[None, :, None] * sensor.num_tx + tx) * sensor.chirp_interval_s
     element = np.arange(ch)[None, None, :]
     out = np.zeros((n, m, ch), np.complex128)
-    for a, r, fd, az in zip(complex_amplitudes(s, sensor, noise_counts_rms), s.range_m, doppler_hz(s, sensor),
+    for a, r, fd, az in zip(complex_amplitudes(s, sensor, noise_counts_rms, if_chain), s.range_m, doppler_hz(s, sensor),
                             s.azimuth_rad):
         beat = 2 * sensor.slope_hz_per_s * r / SPEED_OF_LIGHT
         phase = (beat * t_fast + fd * (t_fast + t_chirp)
