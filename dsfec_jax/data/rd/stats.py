@@ -17,7 +17,9 @@ Per frame:
   SKIP_ROWS (range bin 0, which DC removal empties) are left out;
 per box:
 - size in bins (range rows, Doppler columns), and the peak above the floor: the map's maximum
-  inside the box minus the frame's floor, in dB.
+  inside the box minus the frame's floor, in dB;
+- under the ridge: the zero-Doppler ridge in the box's own rows outshines the box's peak (the
+  share of such boxes says how often an object must be told from the static returns).
 dB: a 'log10' map holds log10(P + 1), so a difference of d is 10 d dB (P >> 1); a 'db' map is in
 dB already; a 'normalised' map is not a log-power any more (no dB figures, no linear power).
 """
@@ -95,16 +97,35 @@ def structure_stats(sample: RDSample) -> dict | None:
                 p99_minus_median_db=float(np.percentile(power, 99)) - median)
 
 
+def _box_cells(sample: RDSample):
+    """(rows, columns) slices of each box: the cells it covers, at least one of each."""
+    for x1, y1, x2, y2 in np.asarray(sample.boxes.xyxy):
+        r0, c0 = int(np.floor(y1)), int(np.floor(x1))
+        yield slice(r0, max(int(np.ceil(y2)), r0 + 1)), slice(c0, max(int(np.ceil(x2)), c0 + 1))
+
+
 def box_peaks_db(sample: RDSample, floor: float) -> np.ndarray:
     """Per box: max of the map inside it minus the floor, in dB (NaN for 'normalised' maps)."""
     per_db = db_per_unit(sample.scale)
     out = np.full(len(sample.boxes), np.nan)
-    for i, (x1, y1, x2, y2) in enumerate(np.asarray(sample.boxes.xyxy)):
-        r0, r1 = int(np.floor(y1)), int(np.ceil(y2))
-        c0, c1 = int(np.floor(x1)), int(np.ceil(x2))
-        cell = sample.power[r0:max(r1, r0 + 1), c0:max(c1, c0 + 1)]
+    for i, (rows, cols) in enumerate(_box_cells(sample)):
+        cell = sample.power[rows, cols]
         if per_db is not None and cell.size:
             out[i] = (float(cell.max()) - floor) * per_db
+    return out
+
+
+def boxes_under_ridge(sample: RDSample, ridge_bins: int = 1) -> np.ndarray:
+    """Per box: whether the zero-Doppler ridge (+-ridge_bins columns) in the box's own rows is
+    stronger than the box's peak, i.e. the object has to be told from the static returns."""
+    power = np.asarray(sample.power)
+    zero = int(np.argmin(np.abs(sample.axes.velocity_mps)))
+    ridge = slice(max(zero - ridge_bins, 0), zero + ridge_bins + 1)
+    out = np.zeros(len(sample.boxes), bool)
+    for i, (rows, cols) in enumerate(_box_cells(sample)):
+        cell = power[rows, cols]
+        if cell.size and power[rows, ridge].size:
+            out[i] = power[rows, ridge].max() > cell.max()
     return out
 
 
@@ -129,7 +150,7 @@ def _objects_in(sample: RDSample) -> np.ndarray:
 
 
 def dataset_stats(samples: Iterable[RDSample], classes=RD_CLASSES, ridge_bins: int = 1) -> dict:
-    floors, spreads, shares, objects, heights, widths, names, peaks = [], [], [], [], [], [], [], []
+    floors, spreads, shares, objects, heights, widths, names, peaks, under = [], [], [], [], [], [], [], [], []
     scales = set()
     for s in samples:
         scales.add(s.scale)
@@ -143,6 +164,7 @@ def dataset_stats(samples: Iterable[RDSample], classes=RD_CLASSES, ridge_bins: i
         heights.append(wh[:, 1])
         names.append(np.asarray(s.boxes.names))
         peaks.append(box_peaks_db(s, floor))
+        under.append(boxes_under_ridge(s, ridge_bins))
     if not floors:
         raise ValueError("dataset_stats: no samples")
     n = len(floors)
@@ -164,6 +186,7 @@ def dataset_stats(samples: Iterable[RDSample], classes=RD_CLASSES, ridge_bins: i
                            for c in classes if np.any(names == c)},
         noise_floor=dict(median=float(np.median(floors)), robust_sd=float(np.median(spreads)), db=floor_db),
         peak_above_floor_db=_summary(np.concatenate(peaks)),
+        boxes_under_ridge=float(np.concatenate(under).mean()) if len(names) else None,
         zero_doppler_share=None if any(x is None for x in shares) else _summary(shares),
         ridge_bins=ridge_bins,
     )
@@ -187,6 +210,7 @@ def stats_rows(s: dict) -> list[tuple[str, str]]:
              ("noise floor (map units)", f"{floor['median']:.3f} (robust sd {floor['robust_sd']:.3f})"),
              ("noise floor (dB)", "-" if db is None else f"{db['median']:.1f} (robust sd {db['robust_sd']:.2f})"),
              ("peak above floor (dB)", _fmt(s["peak_above_floor_db"])),
+             ("boxes under the ridge", "-" if s["boxes_under_ridge"] is None else f"{s['boxes_under_ridge']:.1%}"),
              (f"zero-Doppler share (+-{s['ridge_bins']} col)", _fmt(s["zero_doppler_share"], digits=3))]
     return rows
 

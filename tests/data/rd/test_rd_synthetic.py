@@ -14,8 +14,9 @@ from fuzzing import JSON, bitflip, cache_reads_or_names, corruptions, manifest_r
 from dsfec_jax.data.rd.classes import RD_CLASSES
 from dsfec_jax.data.rd.processing import RDProcessing, rd_spectra, spectra_to_rd
 from dsfec_jax.data.rd.sensor import FMCWSensor
-from dsfec_jax.data.rd.stats import (dataset_stats, format_stats_table, generation_rate, structure_summary,
-                                     zero_doppler_share)
+from dsfec_jax.boxes.boxes2d import Boxes2D
+from dsfec_jax.data.rd.stats import (boxes_under_ridge, dataset_stats, format_stats_table, generation_rate,
+                                     structure_summary, zero_doppler_share)
 from dsfec_jax.data.rd.synthetic import (Actor, ClutterConfig, RDCachedDataset, RDSyntheticConfig, RDSyntheticDataset,
                                          generate_sample, open_cache, sample_rng, simulate, write_cache)
 from dsfec_jax.data.rd.synthetic.boxes import circular_arc, extent_boxes
@@ -313,6 +314,7 @@ def test_benchmark_v2_has_the_structure_of_the_real_capture(val_samples):
     assert -3 < new["near_minus_far_db"]["median"] < -0.8 and abs(old["near_minus_far_db"]["median"]) < 0.5
     assert -11 < new["edge_minus_far_db"]["median"] < -6 and abs(old["edge_minus_far_db"]["median"]) < 0.5
     assert 52 < new["max_minus_median_db"]["median"] < 60
+    assert dataset_stats(val_samples[:12])["boxes_under_ridge"] > 0.3  # objects now meet the static ridge
     with pytest.raises(ValueError, match="version"):
         benchmark_config(3)
 
@@ -340,6 +342,15 @@ def test_statistics_of_synthetic_samples(val_samples):
     first = val_samples[0]
     empty = dataclasses.replace(first, boxes=first.boxes.select(np.zeros(len(first.boxes), bool)), meta={})
     assert dataset_stats([empty])["box_doppler_bins"] is None and zero_doppler_share(empty) is not None
+    assert dataset_stats([empty])["boxes_under_ridge"] is None
+    power = np.zeros((256, 64), np.float32)
+    power[10:20, 32] = 5.0  # a ridge in rows 10-19 only
+    power[12:15, 40:44] = power[40:45, 40:44] = 3.0
+    two = dataclasses.replace(first, power=power, meta={},
+                              boxes=Boxes2D(np.array([[40, 12, 44, 15], [40, 40, 44, 45]], np.float32),
+                                            np.array(["car", "car"])))
+    np.testing.assert_array_equal(boxes_under_ridge(two), [True, False])
+    assert dataset_stats([two])["boxes_under_ridge"] == 0.5
     assert "box Doppler bins" in format_stats_table({"synthetic": stats, "empty": dataset_stats([empty])})
     assert generation_rate(lambda i: generate_sample(CFG, "val", i), count=2) > 0
 
