@@ -187,10 +187,11 @@ def clutter_scatterers(rng: np.random.Generator, cfg: RDSyntheticConfig) -> Scat
 
 
 def area_clutter(rng: np.random.Generator, cfg: RDSyntheticConfig) -> Scatterers:
-    """Beam-limited area clutter from area_min_range_m to max_range_m: RCS sigma0 R fov dR per range
-    bin, area_cells_per_bin scatterers per bin (module docstring)."""
+    """Beam-limited area clutter from area_min_range_m to the sensor's last range bin (the scene goes
+    on past the labelled range; the IF low-pass rolls it off): RCS sigma0 R fov dR per range bin,
+    area_cells_per_bin scatterers per bin (module docstring)."""
     c, sensor = cfg.clutter, cfg.sensor
-    near, far = min(c.area_min_range_m, cfg.max_range_m), cfg.max_range_m
+    near, far = min(c.area_min_range_m, sensor.max_range_m), sensor.max_range_m
     n = int(round(c.area_cells_per_bin * (far - near) / sensor.range_resolution_m))
     if n < 1:
         return Scatterers.empty()
