@@ -29,8 +29,9 @@ from .spectra import SpectralFactors, add_processed_noise, add_static_spectra, f
 
 @functools.lru_cache(maxsize=8)
 def mean_floor_power(cfg: RDSyntheticConfig) -> float:
-    """Mean noise power of one cell of the channel-summed power map (the median over cells of the
-    exact expectation; cells away from range bin 0 all have it)."""
+    """Mean noise power of one cell of the channel-summed power map in the IF chain's pass band (the
+    median over cells of the exact expectation of a flat chain, which cells away from range bin 0
+    all have; the chain shapes it per range bin by if_chain.noise_power_profile)."""
     gain = noise_floor_gain(cfg.sensor, cfg.processing)
     return float(cfg.sensor.num_channels * cfg.noise_counts_rms ** 2 * np.median(gain))
 
