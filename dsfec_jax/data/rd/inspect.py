@@ -30,8 +30,8 @@ def load_rd(source: str, target: str, split: str | None = None, count: int = 50,
     """Up to `count` samples of a source, and facts about how they were obtained."""
     if source == "rd-synthetic":
         from .synthetic import generate_sample
-        from .synthetic.config import BENCHMARK_VERSIONS, benchmark_config
-        version = BENCHMARK_VERSIONS[-1] if benchmark is None else benchmark
+        from .synthetic.config import DEFAULT_BENCHMARK, benchmark_config
+        version = DEFAULT_BENCHMARK if benchmark is None else benchmark
         cfg, split = benchmark_config(version), split or "val"
         start = time.perf_counter()  # the samples inspected are the ones timed: no second pass
         samples = [generate_sample(cfg, split, i, seed) for i in range(count)]

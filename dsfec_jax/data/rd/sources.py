@@ -2,7 +2,8 @@
 
 `synthetic` (or `rd-synthetic`: the embedded FMCW benchmark, generated; splits train/val/test;
 `synthetic:v1` is the benchmark before issue 54's realism, which the shipped RD weights and their
-records were made on, `synthetic:v2` the current default),
+records were made on, and what plain `synthetic` means until they are retrained (config.DEFAULT_BENCHMARK);
+`synthetic:v2` adds static clutter, the IF chain's shape and the Tx->Rx coupling),
 `raddet:PATH` (a RADDet root holding train/ and test/ split folders, or one split folder) and
 `carrada:PATH` (a CARRADA root with its sequence split file). Samples are materialised once:
 a training run visits each many times, and re-simulating a map per visit would cost the host the
@@ -50,12 +51,12 @@ def load_rd_samples(data: str, split: str, count: int | None = None, seed: int =
 
 
 def synthetic_config(data: str, version: str):
-    """The benchmark config of `synthetic[:vN]` ('' for the newest)."""
-    from .synthetic.config import BENCHMARK_VERSIONS, benchmark_config
+    """The benchmark config of `synthetic[:vN]` ("" for DEFAULT_BENCHMARK: the shipped weights' benchmark)."""
+    from .synthetic.config import BENCHMARK_VERSIONS, DEFAULT_BENCHMARK, benchmark_config
     known = [f"v{v}" for v in BENCHMARK_VERSIONS]
     if version and version not in known:
         raise ValueError(f"--data {data!r}: the synthetic benchmark versions are {known}")
-    return benchmark_config(int(version[1:]) if version else BENCHMARK_VERSIONS[-1])
+    return benchmark_config(int(version[1:]) if version else DEFAULT_BENCHMARK)
 
 
 def _real(kind: str, path: Path, split: str):

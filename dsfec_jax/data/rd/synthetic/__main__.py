@@ -1,4 +1,4 @@
-"""python -m dsfec_jax.data.rd.synthetic [--split train] [--samples 500] [--seed 0] [--benchmark 2] [--cache DIR] [--png DIR]
+"""python -m dsfec_jax.data.rd.synthetic [--split train] [--samples 500] [--seed 0] [--benchmark 1|2] [--cache DIR] [--png DIR]
 
 Prints the statistics of a synthetic RD split and its generation rate on this core; optionally
 writes the samples to a cache directory (.npz files, then manifest.json) and PNG previews.
@@ -12,7 +12,7 @@ import json
 from ....argtypes import non_negative_int, positive_int
 from ..preview import save_rd_png
 from ..stats import dataset_stats, format_stats_table, generation_rate
-from .config import BENCHMARK_VERSIONS, benchmark_config
+from .config import BENCHMARK_VERSIONS, DEFAULT_BENCHMARK, benchmark_config
 from .dataset import SPLITS, RDSyntheticDataset, generate_sample, write_cache
 
 
@@ -21,7 +21,7 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--split", default="train", choices=SPLITS)
     p.add_argument("--samples", type=positive_int, default=500)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--benchmark", type=int, default=BENCHMARK_VERSIONS[-1], choices=BENCHMARK_VERSIONS,
+    p.add_argument("--benchmark", type=int, default=DEFAULT_BENCHMARK, choices=BENCHMARK_VERSIONS,
                    help="the benchmark version (1: before issue 54's realism, what the shipped RD weights saw)")
     p.add_argument("--json", action="store_true", help="print the statistics as JSON")
     p.add_argument("--bench", type=non_negative_int, default=100, help="time generating this many maps (0: no)")

@@ -22,7 +22,7 @@ from ...npz_cache import NpzCachedDataset, NpzCacheFormat, npz_bytes, npz_meta
 from ...splits import SPLITS, check_index, check_split, split_rng  # noqa: F401 (SPLITS: exported here)
 from ..sample import RDAxes, RDSample
 from ..sensor import FMCWSensor
-from .config import FORMAT_VERSION, RDSyntheticConfig
+from .config import FORMAT_VERSION, RDSyntheticConfig, benchmark_config
 from .simulate import simulate
 
 sample_rng = split_rng  # the random stream of one sample: sample_rng(seed, split, index)
@@ -38,7 +38,7 @@ class RDSyntheticDataset:
 
     def __init__(self, cfg: RDSyntheticConfig | None = None, split: str = "train", seed: int = 0,
                  num_samples: int = 1000):
-        self.cfg, self.split = cfg or RDSyntheticConfig(), check_split(split)
+        self.cfg, self.split = cfg or benchmark_config(), check_split(split)
         self.seed, self.num_samples = int(seed), int(num_samples)
 
     def __len__(self) -> int:
