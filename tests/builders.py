@@ -4,6 +4,7 @@ tests/ on sys.path when it loads tests/conftest.py). Test modules never import e
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -156,3 +157,40 @@ def boxes2d_scene(n_images=24, seed=0, sloppiness=1.0):
         gts[f"img{i:03d}"] = Boxes2D(gt, names)
         dets[f"img{i:03d}"] = Boxes2D(np.concatenate([det, fp]).astype(np.float32), det_names, scores)
     return gts, dets
+
+
+# --------------------------------------------------------------------------- a tiny model in child processes
+
+# Imported at start-up by every Python process that finds it on PYTHONPATH: registers `tiny_s`
+# (conftest.tiny's dsfec_s) with an init that compiles nothing (slow, and not what the tests of
+# a CLI's processes are about), so the real entry points and their worker processes run in seconds.
+TINY_MODEL_SITE = """
+import jax
+import numpy as np
+
+from dsfec_jax import zoo
+from dsfec_jax.core.grid import Grid
+
+zoo.REGISTRY["tiny_s"] = zoo.create("dsfec_s", name="tiny_s", max_pillars=96, max_points=4,
+    grid=Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)).config
+_init = zoo.Detector.init
+
+
+def quick_init(self, rng):
+    gen = np.random.default_rng(0)
+
+    def fill(path, leaf):
+        low, high = (0.5, 1.5) if path[-1].key == "var" else (-0.1, 0.1)
+        return jax.numpy.asarray(gen.uniform(low, high, leaf.shape), leaf.dtype)
+
+    return jax.tree_util.tree_map_with_path(fill, jax.eval_shape(lambda r: _init(self, r), rng))
+
+
+zoo.Detector.init = quick_init
+"""
+
+
+def tiny_model_pythonpath(folder: Path) -> str:
+    """PYTHONPATH for child processes that know `tiny_s` (TINY_MODEL_SITE, written into FOLDER)."""
+    (folder / "sitecustomize.py").write_text(TINY_MODEL_SITE)
+    return os.pathsep.join([str(folder)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])

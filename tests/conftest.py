@@ -84,6 +84,31 @@ def random_variables(det, seed: int) -> dict:
     return random_fill(jax.eval_shape(det.init, jax.random.key(0)), seed)
 
 
+def random_init(init):
+    """`init` (zoo.Detector.init's signature) without compiling it: its tree's shapes from
+    eval_shape, filled with small uniform weights and positive BN variances. Compiling `init`
+    traces and compiles the whole forward pass (seconds to tens of seconds for a YOLO or a
+    supernet); tests of a pipeline's wiring that train, score or ship whatever weights they get
+    use this (the real init is tested on its own)."""
+
+    def quick_init(self, rng):
+        gen = np.random.default_rng(0)
+
+        def fill(path, leaf):
+            low, high = (0.5, 1.5) if path[-1].key == "var" else (-0.1, 0.1)
+            return jnp.asarray(gen.uniform(low, high, leaf.shape), leaf.dtype)
+
+        return jax.tree_util.tree_map_with_path(fill, jax.eval_shape(lambda r: init(self, r), rng))
+
+    return quick_init
+
+
+@pytest.fixture
+def uncompiled_init(monkeypatch):
+    """Every zoo.Detector's `init` in this test as random_init's (nothing compiled)."""
+    monkeypatch.setattr(zoo.Detector, "init", random_init(zoo.Detector.init))
+
+
 @pytest.fixture
 def tiny_detector():
     return tiny

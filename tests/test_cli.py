@@ -15,7 +15,7 @@ def tiny_model(monkeypatch):
     return "tiny_s"
 
 
-def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys):
+def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys, uncompiled_init):
     run = tmp_path / "run"
     assert cli.main(["train", "--model", tiny_model, "--steps", "3", "--batch-size", "2", "--frames", "4",
                      "--val-frames", "2", "--eval-every", "3", "--run-dir", str(run), "--max-pillars", "96",

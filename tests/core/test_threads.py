@@ -1,8 +1,9 @@
 """--threads in `dsfec bench` and `python -m dsfec_jax.profile`: a real thread count, recorded truthfully.
 
 Each CLI runs in a subprocess (pinning is per process and XLA sizes its pool once). A
-sitecustomize on PYTHONPATH registers a tiny model (with an init that compiles nothing) in
-every process, bench workers included, so the real entry points run in seconds.
+sitecustomize on PYTHONPATH (builders.TINY_MODEL_SITE) registers a tiny model (with an init
+that compiles nothing) in every process, bench workers included, so the real entry points run
+in seconds.
 """
 
 import json
@@ -13,7 +14,7 @@ import sys
 import pytest
 
 from dsfec_jax.core import threads
-
+from builders import tiny_model_pythonpath
 
 
 @pytest.fixture(autouse=True)
@@ -23,37 +24,11 @@ def two_cpus():
     if not hasattr(os, "sched_setaffinity") or len(threads.available_cpus()) < 2:
         pytest.fail(f"--threads 2 needs Linux CPU affinity and 2 CPUs; this process may use {threads.available_cpus()}")
 
-SITE = """
-import jax
-import numpy as np
-
-from dsfec_jax import zoo
-from dsfec_jax.core.grid import Grid
-
-zoo.REGISTRY["tiny_s"] = zoo.create("dsfec_s", name="tiny_s", max_pillars=96, max_points=4,
-    grid=Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)).config
-_init = zoo.Detector.init
-
-
-def quick_init(self, rng):  # skips compiling init (slow, and not what these tests are about)
-    gen = np.random.default_rng(0)
-
-    def fill(path, leaf):
-        low, high = (0.5, 1.5) if path[-1].key == "var" else (-0.1, 0.1)
-        return jax.numpy.asarray(gen.uniform(low, high, leaf.shape), leaf.dtype)
-
-    return jax.tree_util.tree_map_with_path(fill, jax.eval_shape(lambda r: _init(self, r), rng))
-
-
-zoo.Detector.init = quick_init
-"""
-
 
 def run_cli(tmp_path, args: list[str]) -> subprocess.CompletedProcess:
-    (tmp_path / "sitecustomize.py").write_text(SITE)
-    path = [str(tmp_path)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(path)}
-    env.pop("XLA_FLAGS", None)
+    # XLA_FLAGS stays: the session's compile-cheaply flag (conftest) reaches the CLI and its bench
+    # workers, which compile their programs faster; it does not touch the thread pools
+    env = {**os.environ, "PYTHONPATH": tiny_model_pythonpath(tmp_path)}
     proc = subprocess.run([sys.executable, *args], env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return proc

@@ -17,6 +17,7 @@ from dsfec_jax.deploy.export import load_jax_export
 from dsfec_jax.modalities.points.export import end_to_end, export, map_outputs
 from dsfec_jax.modalities.points.ort import OrtPredictor
 from dsfec_jax.modalities.points.predict import Predictor
+from builders import tiny_model_pythonpath
 from conftest import tiny
 
 
@@ -236,26 +237,33 @@ def test_int8_quantization_is_smaller_and_keeps_the_detections(shipped_s_export,
     assert abs(broken["car_mAP_change"]) > 1.5 and broken["agreement"] < 55, broken  # the check can fail
 
 
-def test_bench_times_every_stage_per_runtime_and_writes_reports(tmp_path, capsys):
+def test_bench_times_every_stage_per_runtime_and_writes_reports(tmp_path, capsys, monkeypatch):
+    """On the tiny DSFEC-S (conftest.tiny), which the bench's worker process knows through
+    builders.TINY_MODEL_SITE: every stage, both runtimes and the reports, in seconds."""
     from dsfec_jax.cli import main
 
-    assert main(["bench", "--models", "dsfec_s", "--runtimes", "jax,onnx", "--repeats", "2", "--warmup", "1",
-                 "--out", str(tmp_path), "--json"]) == 0
+    monkeypatch.setitem(zoo.REGISTRY, "tiny_s", tiny("dsfec_s", name="tiny_s").config)
+    site = tmp_path / "site"
+    site.mkdir()
+    monkeypatch.setenv("PYTHONPATH", tiny_model_pythonpath(site))
+    out = tmp_path / "bench"
+    assert main(["bench", "--models", "tiny_s", "--runtimes", "jax,onnx", "--repeats", "2", "--warmup", "1",
+                 "--out", str(out), "--json"]) == 0
     captured = capsys.readouterr()
     records = json.loads(captured.out)
     # the worker's progress reaches the user's stderr as it runs (it was captured and dropped: 2.5 min of silence)
-    for said in ("preparing dsfec_s for jax, onnx", "measuring dsfec_s's JAX throughput", "warming up 2 chains x 1",
+    for said in ("preparing tiny_s for jax, onnx", "measuring tiny_s's JAX throughput", "warming up 2 chains x 1",
                  "timing 2 chains, interleaved"):
         assert said in captured.err, captured.err[-2000:]
-    assert [(r["model"], r["runtime"], r["threads"]) for r in records] == [("dsfec_s", "jax", 1), ("dsfec_s", "onnx", 1)]
+    assert [(r["model"], r["runtime"], r["threads"]) for r in records] == [("tiny_s", "jax", 1), ("tiny_s", "onnx", 1)]
     for r in records:
         assert list(r["stages_ms"]) == ["pillarize", "network_decode", "nms"]  # the predictors' own stages
         assert r["total_ms"] >= r["stages_ms"]["network_decode"] > 0 and r["cpu"] and r["versions"]["onnxruntime"]
     assert set(records[0]["throughput_fps"]) == set(records[0]["throughput_fps_p10_p90"]) == {"1", "2", "4", "8"}
-    assert "JAX / ONNX Runtime (dsfec_s, 1 thread)" in (tmp_path / "bench.md").read_text()
+    assert "JAX / ONNX Runtime (tiny_s, 1 thread)" in (out / "bench.md").read_text()
     assert records[0]["machine"]["text"].startswith(("busy: ", "idle: "))
-    assert (tmp_path / "bench.png").read_bytes()[:4] == b"\x89PNG"
-    assert json.loads((tmp_path / "bench.json").read_text())["command"].startswith("dsfec bench")
+    assert (out / "bench.png").read_bytes()[:4] == b"\x89PNG"
+    assert json.loads((out / "bench.json").read_text())["command"].startswith("dsfec bench")
     with pytest.raises(SystemExit, match="unknown"):
         main(["bench", "--models", "dsfec_xl"])
 

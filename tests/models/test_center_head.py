@@ -115,7 +115,7 @@ def test_loss_gradient_is_finite_on_an_all_zero_map():
     assert float(jnp.abs(grads["rot"]).max()) > 0  # the real objects still pull on the yaw codes
 
 
-def test_fit_trains_radarnext_on_windows_including_empty_ones(tmp_path):
+def test_fit_trains_radarnext_on_windows_including_empty_ones(tmp_path, uncompiled_init):
     """The whole path: 4D frames -> windowed CenterHead batches (origin inputs, one compiled
     step; some 32-cell windows of this narrow field of view hold no point at all) -> VoD metric."""
     import json

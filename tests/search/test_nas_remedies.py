@@ -67,7 +67,7 @@ def _same(a, b) -> bool:
     return all(np.array_equal(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
 
 
-def test_resumed_sandwich_run_equals_an_uninterrupted_one_and_updates_once_a_cycle(setting, tmp_path):
+def test_resumed_sandwich_run_equals_an_uninterrupted_one_and_updates_once_a_cycle(setting, tmp_path, uncompiled_init):
     from search.nas.spos_points import base_init, supernet_detectors
     from dsfec_jax.train.step import init_state
 
@@ -105,7 +105,7 @@ def test_a_supernet_dir_refuses_the_other_rule(tmp_path):
         sampling_info(tmp_path / "legacy", "sandwich")
 
 
-def test_remedies_entry_trains_another_supernet_and_writes_its_row(tmp_path):
+def test_remedies_entry_trains_another_supernet_and_writes_its_row(tmp_path, uncompiled_init):
     from search.nas import remedies
 
     space = get_space("dsfec")

@@ -61,7 +61,7 @@ def test_activation_candidates_one_component_at_a_time():
     assert {"act_car_head": "relu", "act_truck_head": "relu"} in [c["overrides"] for c in cands]
 
 
-def test_real_sweep_trains_measures_and_reports(tiny_search, tmp_path, capsys):
+def test_real_sweep_trains_measures_and_reports(tiny_search, tmp_path, capsys, uncompiled_init):
     out = tmp_path / "run"
     assert blocks.main(["--stage", "2", "--values", "1,2", "--base", tiny_search, "--strategy", "train",
                         "--out", str(out)]) == 0
@@ -157,9 +157,10 @@ def test_experiment_tables_print_the_paper_beside_ours(tmp_path, monkeypatch, ca
 
 
 # Imported at start-up by every Python process that sees it on PYTHONPATH; only Ray's trial
-# workers act on it: they build their variables from init's shapes instead of compiling `init`
-# (~12 s of each ~40 s trial, and not what the Ray backend test is about). Training, validation,
-# profiling and the journal are the real ones.
+# workers act on it: they register tiny_search's base (the trials name it) and build their
+# variables from init's shapes instead of compiling `init` (~12 s of each ~40 s trial, and not
+# what the Ray backend test is about). Training, validation, profiling and the journal are the
+# real ones.
 RAY_WORKER_SITE = """
 import sys
 
@@ -168,6 +169,11 @@ if sys.argv and sys.argv[0].endswith("default_worker.py"):
     import numpy as np
 
     from dsfec_jax import zoo
+    from dsfec_jax.core.grid import Grid
+
+    zoo.REGISTRY["tiny_l"] = zoo.create(
+        "dsfec_l", name="tiny_l", stage_blocks=(1, 2, 1, 1), head_convs=1, max_pillars=96, max_points=4,
+        grid=Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)).config
 
     _init = zoo.Detector.init
 
@@ -184,7 +190,9 @@ if sys.argv and sys.argv[0].endswith("default_worker.py"):
 """
 
 
-def test_ray_backend_runs_a_two_trial_sweep(tmp_path, monkeypatch):
+def test_ray_backend_runs_a_two_trial_sweep(tiny_search, tmp_path, monkeypatch):
+    """Two trials of the tiny base (registered in Ray's workers too, by RAY_WORKER_SITE) on the
+    smoke recipe, which the workers resolve by name."""
     import os
 
     site = tmp_path / "site"
@@ -193,7 +201,7 @@ def test_ray_backend_runs_a_two_trial_sweep(tmp_path, monkeypatch):
     inherited = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(site), *inherited]))  # Ray's workers inherit it
     out = tmp_path / "ray_run"
-    assert blocks.main(["--stage", "4", "--values", "1,2", "--base", "dsfec_s", "--profile", "smoke",
+    assert blocks.main(["--stage", "4", "--values", "1,2", "--base", tiny_search, "--profile", "smoke",
                         "--strategy", "train", "--backend", "ray", "--out", str(out)]) == 0
     records = Journal(out).records()
     assert sorted(r["label"] for r in records) == ["stage4_blocks=1", "stage4_blocks=2"]
@@ -201,7 +209,7 @@ def test_ray_backend_runs_a_two_trial_sweep(tmp_path, monkeypatch):
     assert (out / "report.md").exists()
 
 
-def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path, monkeypatch, capsys):
+def test_oneshot_trains_one_supernet_and_ranks_every_depth(tiny_search, tmp_path, monkeypatch, capsys, uncompiled_init):
     from search import oneshot
 
     out = tmp_path / "oneshot"

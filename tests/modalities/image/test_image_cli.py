@@ -26,7 +26,7 @@ def last_json(capsys):
     return json.loads(capsys.readouterr().out)  # the command's one JSON document
 
 
-def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
+def test_train_eval_predict_ship_round_trip(tmp_path, capsys, uncompiled_init):
     run = tmp_path / "run"
     assert cli.main(["train", "--model", "shuffle_yolov3", "--data", "street", "--steps", "2", "--batch-size", "2",
                      "--frames", "2", "--val-frames", "2", "--eval-every", "0", "--sizes", "64", "--size", "64",

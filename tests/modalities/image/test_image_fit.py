@@ -30,7 +30,7 @@ SIZES = MultiScale((64, 96), every=1)
 STEPS, SEED = 3, 2  # seed 2 draws sizes 96, 64, 64 for steps 0-2: two sizes, one of them twice
 
 
-def test_one_trace_per_input_size_and_a_resumed_run_is_the_straight_one(tmp_path, monkeypatch, caplog):
+def test_one_trace_per_input_size_and_a_resumed_run_is_the_straight_one(tmp_path, monkeypatch, caplog, uncompiled_init):
     """Also: the boxes that 4 slots an image cut off reach metrics.jsonl, and one warning."""
     det = zoo.create("shuffle_yolov3", **TINY)
     targets = functools.partial(pad_batch, class_names=det.config.classes, max_boxes=4)

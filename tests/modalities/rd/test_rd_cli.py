@@ -23,7 +23,7 @@ def last_json(capsys):
     return json.loads(capsys.readouterr().out)
 
 
-def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
+def test_train_eval_predict_ship_round_trip(tmp_path, capsys, uncompiled_init):
     run = tmp_path / "run"
     assert cli.main(["train", "--model", "yolov8n", "--steps", "1", "--batch-size", "2", "--frames", "2",
                      "--val-frames", "2", "--eval-every", "0", "--run-dir", str(run)]) == 0
