@@ -98,10 +98,13 @@ class PostgresStore(SqlStore):
     @contextmanager
     def transaction(self):
         """`with store.transaction() as tx:` one write transaction, committed on leaving the block,
-        rolled back on any exception; writers commit one at a time (the module docstring)."""
-        with self._pool.connection() as conn, conn.transaction():
+        rolled back on any exception; writers commit one at a time (the module docstring). In
+        pipeline mode: statements whose results nobody reads go out together, so the lock is held
+        for two round trips of a batch's put (the duplicate check, then the inserts and commit),
+        not one per statement."""
+        with self._pool.connection() as conn, conn.pipeline() as pipeline, conn.transaction():
             conn.execute(_WRITE_LOCK)
-            yield _Connection(conn)
+            yield _Connection(conn, pipeline)
 
     @contextmanager
     def snapshot(self):
@@ -126,16 +129,34 @@ class _Connection:
     """A psycopg connection that takes sqlite3's `?` placeholders (sql_store's queries hold no `?`
     or `%` of their own) and has executemany."""
 
-    def __init__(self, conn: psycopg.Connection):
-        self._conn = conn
+    def __init__(self, conn: psycopg.Connection, pipeline: psycopg.Pipeline | None = None):
+        self._conn, self._pipeline = conn, pipeline
 
-    def execute(self, sql: str, args=()) -> psycopg.Cursor:
-        return self._conn.execute(sql.replace("?", "%s"), tuple(args))
+    def execute(self, sql: str, args=()) -> _Result:
+        return _Result(self._conn.execute(sql.replace("?", "%s"), tuple(args)), self._pipeline)
 
-    def executemany(self, sql: str, rows) -> psycopg.Cursor:
+    def executemany(self, sql: str, rows) -> _Result:
         cursor = self._conn.cursor()
         cursor.executemany(sql.replace("?", "%s"), list(rows))
-        return cursor
+        return _Result(cursor, self._pipeline)
+
+
+class _Result:
+    """A cursor as sqlite3's: fetchone, fetchall, iteration, and a rowcount that is known also in
+    pipeline mode (where it waits for the server's answers first)."""
+
+    def __init__(self, cursor: psycopg.Cursor, pipeline: psycopg.Pipeline | None):
+        self._cursor, self._pipeline = cursor, pipeline
+        self.fetchone, self.fetchall = cursor.fetchone, cursor.fetchall
+
+    def __iter__(self):
+        return iter(self._cursor)
+
+    @property
+    def rowcount(self) -> int:
+        if self._pipeline is not None:
+            self._pipeline.sync()
+        return self._cursor.rowcount
 
 
 def redacted(dsn: str) -> str:
