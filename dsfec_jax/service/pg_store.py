@@ -4,12 +4,15 @@ and guarantees are sql_store.py's, shared with SQLite; this module adds connecti
 and the schema.
 
 Several server processes (and machines) share one database, each with a pool of connections.
-Write transactions take a transaction-scoped advisory lock first (one key per schema), held
-until the commit is visible: the ids (identity columns) are then taken and committed in order,
-which is what the map's cursors need. Without it, a transaction holding id 7 could commit after
-one holding id 8, and a reader whose cursor passed 8 would never see 7. The parsing, validation,
-authentication and HTTP work of the requests still run in parallel in every worker; reads take
-no lock at all.
+Writers run side by side (their commits share the WAL's flushes), which leaves the map's cursors
+a problem: a transaction holding id 7 may commit after one holding id 8, and a reader whose
+cursor passed 8 would never see 7. So each write transaction holds a shared advisory lock (one
+key per schema) until its commit is visible, and a read that answers with a cursor
+(cursor_snapshot) takes the same lock exclusively just while it takes its snapshot: no writer is
+then in flight, every id taken so far is committed or rolled back, and the snapshot's ids leave no
+hole that a later commit could fill. Such a reader waits for the writers in flight (a commit's
+time) and holds new ones back for one round trip. A second lock on (device, batch_id) makes put's
+check-then-insert atomic for that key; other reads (tokens, counts) take no lock.
 
 Durability: synchronous="FULL" keeps synchronous_commit on (the 201 is sent once the commit is
 flushed to disk); "NORMAL" turns it off: faster, safe against a killed service, but a crash of the
@@ -46,7 +49,8 @@ POOL_MAX = 8        # connections per server process: writes queue on the lock a
 POOL_WAIT_S = 30.0  # a request waits this long for a free connection before it fails
 _TABLES = tables_sql(id="BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY", real="DOUBLE PRECISION",
                      text='TEXT COLLATE "C"', count="BIGINT")
-_WRITE_LOCK = "SELECT pg_advisory_xact_lock(hashtext(current_schema()))"
+_WRITERS = "hashtext(current_schema())"  # the advisory lock key of the schema's writers (bigint key space)
+_KEY_LOCK = "SELECT pg_advisory_xact_lock(hashtext(current_schema() || ?), hashtext(?))"  # the (int, int) key space
 
 
 class PostgresStore(SqlStore):
@@ -96,15 +100,17 @@ class PostgresStore(SqlStore):
             tx.execute("INSERT INTO dsfec_schema VALUES (?)", (SCHEMA_VERSION,))
 
     @contextmanager
-    def transaction(self):
+    def transaction(self, key: tuple[str, str] | None = None):
         """`with store.transaction() as tx:` one write transaction, committed on leaving the block,
-        rolled back on any exception; writers commit one at a time (the module docstring). In
-        pipeline mode: statements whose results nobody reads go out together, so the lock is held
-        for two round trips of a batch's put (the duplicate check, then the inserts and commit),
-        not one per statement."""
+        rolled back on any exception; `key` (device, batch_id): no other transaction of that key
+        runs meanwhile. In pipeline mode: statements whose results nobody reads go out together
+        (a put costs two round trips: the duplicate check, then the inserts and the commit)."""
         with self._pool.connection() as conn, conn.pipeline() as pipeline, conn.transaction():
-            conn.execute(_WRITE_LOCK)
-            yield _Connection(conn, pipeline)
+            conn.execute(f"SELECT pg_advisory_xact_lock_shared({_WRITERS})")
+            tx = _Connection(conn, pipeline)
+            if key is not None:
+                tx.execute(_KEY_LOCK, key)
+            yield tx
 
     @contextmanager
     def snapshot(self):
@@ -112,6 +118,23 @@ class PostgresStore(SqlStore):
         with self._pool.connection() as conn, conn.transaction():
             conn.execute("SET TRANSACTION ISOLATION LEVEL REPEATABLE READ, READ ONLY")
             yield _Connection(conn)
+
+    @contextmanager
+    def cursor_snapshot(self):
+        """A read transaction taken while no writer is in flight (the module docstring)."""
+        with self._pool.connection() as conn:
+            conn.execute(f"SELECT pg_advisory_lock({_WRITERS})")
+            try:
+                # the snapshot is taken by the transaction's first query: the unlock, still locked
+                conn.execute("BEGIN ISOLATION LEVEL REPEATABLE READ, READ ONLY")
+                conn.execute(f"SELECT pg_advisory_unlock({_WRITERS})")
+            except BaseException:
+                conn.execute("SELECT pg_advisory_unlock_all()")
+                raise
+            try:
+                yield _Connection(conn)
+            finally:
+                conn.execute("COMMIT")
 
     def snapshot_rows(self, sql: str, args=()) -> list[tuple]:
         """The rows of one read-only query (tokens.py's lookups)."""

@@ -9,18 +9,19 @@ What every backend guarantees (docs/edge-and-map-service.md, "Map service"):
 - idempotency: a batch is keyed by (device, batch_id), so a batch id lives in its device's
   namespace; `content_sha256` is the hash of the validated batch: a re-post with the same hash is
   a duplicate (nothing written), a different hash under the same key is a Conflict;
-- write transactions commit one at a time, in the order of the ids they take: batches and objects
-  have ids that never go back (not even after a delete), and a reader never sees id N+1 committed
-  while N is still to come. The map page's cursors ("what is new since id N") rely on it;
+- batches and objects have ids that never go back (not even after a delete), and a read that
+  answers with a cursor (`cursor_snapshot`) never sees id N+1 committed while N is still to come:
+  the map page's cursors ("what is new since id N") rely on it;
 - per-device counts kept in the same transaction as each insert or delete, so /health reads a few
   rows, not a count over millions;
 - objects carry their batch's time and device (denormalised) so the bbox/since query reads one
   table through its indexes: (time) for "latest since", (lat, lon) for a small bounding box.
 
 A backend provides `transaction()` (one write transaction: tx.execute / tx.executemany with `?`
-placeholders, the cursor's fetchone / fetchall / rowcount) and `snapshot()` (a read transaction
-that sees one state of the database), plus snapshot_rows, close, journal_mode and `name` (the
-database as the operator named it, without a password).
+placeholders, the cursor's fetchone / fetchall / rowcount), `snapshot()` (a read transaction
+that sees one state of the database), `cursor_snapshot()` where writers run side by side (the
+reads that page or answer by id: objects, tracks, export), snapshot_rows, close, journal_mode and
+`name` (the database as the operator named it, without a password).
 """
 
 from __future__ import annotations
@@ -113,11 +114,18 @@ class SqlStore:
     name = ""
     synchronous = "FULL"
 
-    def transaction(self):
+    def transaction(self, key: tuple[str, str] | None = None):
+        """One write transaction; `key` (device, batch_id): no other transaction of that key runs
+        at the same time (put's check-then-insert)."""
         raise NotImplementedError
 
     def snapshot(self):
         raise NotImplementedError
+
+    def cursor_snapshot(self):
+        """A read transaction whose rows and cursor leave no id behind that a writer still holds
+        (objects and tracks answer with a cursor). A backend with one writer at a time: snapshot."""
+        return self.snapshot()
 
     # -- writes ----------------------------------------------------------------------------------
     def put(self, batch: FrameBatch, received: float | None = None) -> str:
@@ -125,7 +133,7 @@ class SqlStore:
         raises Conflict when the device's batch id holds different content."""
         digest = batch.content_hash()
         received = _time.time() if received is None else received
-        with self.transaction() as tx:
+        with self.transaction(key=(batch.device, batch.batch_id)) as tx:
             row = tx.execute("SELECT content_sha256 FROM batches WHERE device = ? AND batch_id = ?",
                              (batch.device, batch.batch_id)).fetchone()
             if row is None:
@@ -195,7 +203,7 @@ class SqlStore:
             where.append("o.lon BETWEEN ? AND ?" if minlon <= maxlon else "(o.lon >= ? OR o.lon <= ?)")
             args += [minlat, maxlat, minlon, maxlon]
         order = "o.id" if after is not None else "o.time DESC, o.batch_id, o.idx"
-        with self.snapshot() as conn:
+        with self.cursor_snapshot() as conn:
             rows = conn.execute(
                 "SELECT o.batch_id, o.idx, o.class, o.score, o.box_x1, o.box_y1, o.box_x2, o.box_y2, o.depth_m, o.x_m,"
                 " o.lat, o.lon, o.alt, b.device, b.frame, b.time, b.ego_lat, b.ego_lon, b.ego_alt, b.ego_heading_deg, o.id"
@@ -222,7 +230,7 @@ class SqlStore:
         pass as `after` next time. Without `after`: at most `max_points` per device, spread evenly
         over its time span (first and last kept). With `after`: the positions stored after the
         cursor (at most max_points in all, oldest first; call again with the new cursor for more)."""
-        with self.snapshot() as conn:
+        with self.cursor_snapshot() as conn:
             newest = conn.execute("SELECT COALESCE(MAX(seq), 0) FROM batches").fetchone()[0]
             if after is not None:
                 where, args = _filters(device, since, None)
@@ -244,7 +252,7 @@ class SqlStore:
         where, args = _filters(device, since, until)
         last = 0
         while True:
-            with self.snapshot() as conn:
+            with self.cursor_snapshot() as conn:
                 heads = conn.execute(f"SELECT seq, batch_id, device, frame, time, ego_lat, ego_lon, ego_alt, ego_heading_deg"
                                      f" FROM batches WHERE {where} AND seq > ? ORDER BY seq LIMIT ?",
                                      (*args, last, page)).fetchall()

@@ -140,9 +140,10 @@ class Store(SqlStore):
             conn.execute("PRAGMA foreign_keys = ON")
 
     @contextmanager
-    def transaction(self):
+    def transaction(self, key: tuple[str, str] | None = None):
         """`with store.transaction() as tx:` one write transaction (BEGIN IMMEDIATE), committed on
-        leaving the block, rolled back on any exception. tx.execute / executemany as sqlite3's."""
+        leaving the block, rolled back on any exception. tx.execute / executemany as sqlite3's.
+        `key` needs nothing here: one writer at a time holds every key."""
         conn = self._conn()
         with self._write_lock:
             conn.execute("BEGIN IMMEDIATE")

@@ -87,7 +87,7 @@ def test_a_postgres_database_that_is_not_the_services_is_named():
 
 def test_ids_commit_in_order_under_concurrent_writers(db):
     """The map's cursor ("objects after id N") never skips a row: whenever a reader sees object id
-    N, every id below N that will ever be stored is visible too (writers commit in id order)."""
+    N, every id below N that will ever be stored is visible too, while writers run side by side."""
     store = open_store(db)
     seen_gaps, stop = [], threading.Event()
 
@@ -97,7 +97,7 @@ def test_ids_commit_in_order_under_concurrent_writers(db):
 
     def read():
         while not stop.is_set():
-            with store.snapshot() as conn:
+            with store.cursor_snapshot() as conn:  # as objects() and tracks() read
                 ids = [i for (i,) in conn.execute("SELECT id FROM objects ORDER BY id")]
             if ids and ids != list(range(1, len(ids) + 1)):  # no rollbacks here: ids have no holes
                 seen_gaps.append(ids)

@@ -56,6 +56,7 @@ def test_two_workers_store_every_batch_once_and_exit_with_their_supervisor(tmp_p
             loadtest.wait_healthy(url, proc)
             workers = [p for p in _session(proc.pid) if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()]
             assert len(workers) == 2, (tmp_path / "server.log").read_text()
+            assert [post(url, make_batch(0, "dev-a"))[0] for _ in range(4)] == [401] * 4  # every worker checks tokens
 
             def device(name):
                 for i in range(20):
