@@ -80,7 +80,10 @@ class PostgresStore(SqlStore):
         conn.execute(f"SET synchronous_commit = {'on' if self.synchronous == 'FULL' else 'off'}")
 
     def _init_schema(self) -> None:
-        with self.transaction() as tx:  # the lock: server processes starting together create it once
+        # its own lock: server processes (or token commands) starting together create the tables once
+        with self._pool.connection() as conn, conn.transaction():
+            conn.execute("SELECT pg_advisory_xact_lock(hashtext(current_schema() || ':schema'))")
+            tx = _Connection(conn)
             schema = tx.execute("SELECT current_schema()").fetchone()[0]
             if schema is None:
                 raise ValueError(f"--db {self.name}: no schema to create the tables in (search_path names none that exists)")

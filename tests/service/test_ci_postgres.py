@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import postgres_url
+from stores import postgres_url
 
 SCRIPT = Path(__file__).resolve().parents[2] / ".ci" / "postgres"
 

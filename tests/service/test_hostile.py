@@ -3,7 +3,7 @@ header bounds), over real sockets: malformed and out-of-range batches, oversized
 lying bodies, slow clients, squatting without a token or with another device's, a foreign Host.
 Each gets a 4xx or a closed connection, nothing bad is stored (the database is read at the end),
 and /health keeps answering meanwhile. One server for the module (short deadlines so it is fast),
-on each store (conftest.py's `module_db`)."""
+on each store (stores.py's `module_db`)."""
 
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ from dsfec_jax.service import tokens
 from dsfec_jax.service.app import Access
 from dsfec_jax.service.store import open_store
 from service_helpers import LAT0, LiveServer, changed, get, make_batch, post, stored_rows
+from stores import module_db  # noqa: F401 (pytest fixtures)
 
 BODY_TIMEOUT_S = HEADER_TIMEOUT_S = 1.0
 

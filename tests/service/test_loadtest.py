@@ -10,10 +10,10 @@ import json
 
 import pytest
 
-from conftest import STORES, postgres_url
 from dsfec_jax.edge import loadtest
 from dsfec_jax.service.schema import FrameBatch
 from dsfec_jax.service.store import open_store
+from stores import STORES, db, postgres_url  # noqa: F401 (db: a pytest fixture)
 
 
 def _stored(db, batches):

@@ -21,6 +21,7 @@ from dsfec_jax.service.schema import FrameBatch
 from dsfec_jax.service.server import resolve_access
 from dsfec_jax.service.store import Store, open_store
 from service_helpers import LiveServer, get, make_batch, post, stored_rows
+from stores import db, module_db  # noqa: F401 (pytest fixtures)
 
 
 @pytest.fixture

@@ -1,7 +1,7 @@
 """The map service over real HTTP (uvicorn on a free localhost port): POST /detections' answers
 (stored, duplicate, conflict, schema errors naming the field with nothing stored), the bbox/since
 query, ego tracks, WAL mode, body limits, and exactly-once storage under concurrent re-posts.
-The tests of storing and reading run on both stores (`fresh`: conftest.py's `db`)."""
+The tests of storing and reading run on both stores (`fresh`: stores.py's `db`)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ import urllib.parse
 import pytest
 
 from service_helpers import DELETE, LAT0, LON0, T0, LiveServer, changed, get, make_batch, post, stored_rows
+from stores import db  # noqa: F401 (pytest fixtures)
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""The stores directly, SQLite and PostgreSQL alike (conftest.py's `db`): one transaction per batch
+"""The stores directly, SQLite and PostgreSQL alike (stores.py's `db`): one transaction per batch
 (a failure half-way leaves nothing), the exchange format back, tracks decimated evenly, ids that
 commit in order under concurrent writers; clear errors for a file or schema that is not the
 service's database, and a light service (no jax import)."""
@@ -12,12 +12,12 @@ import threading
 
 import pytest
 
-from conftest import postgres_url
 from dsfec_jax.core.pg_scratch import scratch_schema
 from dsfec_jax.service.schema import FrameBatch
 from dsfec_jax.service.sql_store import SqlStore
 from dsfec_jax.service.store import Conflict, Store, open_store
 from service_helpers import make_batch
+from stores import db, postgres_url  # noqa: F401 (pytest fixtures)
 
 
 def test_a_batch_that_fails_half_way_leaves_nothing(db, monkeypatch):
@@ -83,6 +83,22 @@ def test_a_postgres_database_that_is_not_the_services_is_named():
             conn.execute("CREATE TABLE batches (id integer)")
         with pytest.raises(ValueError, match="holds tables \\['batches'\\] but no dsfec_schema"):
             open_store(foreign)
+
+
+def test_servers_starting_together_create_the_tables_once():
+    with scratch_schema(postgres_url(), "test") as url:
+        failures = []
+
+        def start():
+            try:
+                open_store(url).close()
+            except Exception as e:  # noqa: BLE001 (any failure is the finding)
+                failures.append(repr(e))
+
+        threads = [threading.Thread(target=start) for _ in range(6)]
+        [t.start() for t in threads]
+        [t.join() for t in threads]
+        assert not failures
 
 
 def test_ids_commit_in_order_under_concurrent_writers(db):

@@ -13,13 +13,13 @@ from pathlib import Path
 
 import pytest
 
-from conftest import postgres_url
 from dsfec_jax.core.pg_scratch import scratch_schema
 from dsfec_jax.edge import loadtest
 from dsfec_jax.service import tokens
 from dsfec_jax.service.server import check_workers
 from dsfec_jax.service.store import open_store
 from service_helpers import get, make_batch, post, stored_rows
+from stores import postgres_url
 
 
 def test_workers_are_refused_on_sqlite_and_bounded():

@@ -1,7 +1,9 @@
-"""The map service's two stores under the same tests: `db` (one test) and `module_db` (a module's
-shared server) are a SQLite file, then a fresh schema of the PostgreSQL database that
+"""The map service's two stores under the same tests: the fixtures `db` (one test) and `module_db`
+(a module's shared server) are a SQLite file, then a fresh schema of the PostgreSQL database that
 DSFEC_TEST_POSTGRES names (.ci/run starts a server and sets it). Without it the PostgreSQL
-variants skip, saying why; under CI=true they fail instead, so a CI that lost its server is red."""
+variants skip, saying why; under CI=true they fail instead, so a CI that lost its server is red.
+A test module imports the fixtures it uses (`from stores import db`): a conftest.py here would
+shadow tests/conftest.py for the modules that `from conftest import ...`."""
 
 from __future__ import annotations
 
