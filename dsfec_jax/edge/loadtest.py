@@ -2,25 +2,28 @@
 
     python -m dsfec_jax.edge.loadtest --devices 8 --seconds 20 --out runs/loadtest
     python -m dsfec_jax.edge.loadtest --devices 8 --seconds 20 --kill-at 8 --out runs/loadtest
+    python -m dsfec_jax.edge.loadtest --devices 8 --seconds 20 --db postgresql://USER@HOST/DB --workers 2 --out runs/loadtest
 
 It lives on the devices' side of the wire: it starts the server as a separate process
 (`python -m dsfec_jax.service`, uvicorn, a fresh database on a free localhost port, write tokens
 on: one device token per simulated device, issued with `python -m dsfec_jax.service token add`), talks to it
 only over HTTP through edge.uplink.Uplink, and reads its database file with sqlite3 afterwards; it
 imports nothing of service/ (tests/test_architecture.py: edge and service meet only over HTTP).
+With --db postgresql://... the service stores into a fresh schema of that database (created for
+the run, read back with psycopg, dropped at the end) and may run --workers processes.
 
 N simulated devices (threads) each drive their own track and post one frame batch per frame (0-2K
 objects placed ahead of the ego with the issue's placement formula and pymap3d), each through its
 own Uplink and disk queue, for T seconds; then every device flushes its queue. `--rate 0` (the
 default) is a closed loop: a device makes its next frame as soon as the previous one was delivered
 (send() only queues it: the uplink's sender thread posts, so the loop waits on flush()), which
-measures capacity; `--rate 10` is a 10 fps camera. With --kill-at S the server is SIGKILLed
-S seconds in and restarted on the same port and database --pause seconds later, while the devices
+measures capacity; `--rate 10` is a 10 fps camera. With --kill-at S the server (its supervisor and every worker: the
+process group) is SIGKILLed S seconds in and restarted on the same port and database --pause seconds later, while the devices
 keep generating (their uplinks queue and retry).
 
 Checked afterwards in the database file: the stored batch ids are exactly the generated ones (none
 missing, none extra, none twice), every stored batch and object holds exactly the values its device
-generated, no object is orphaned, the totals agree, PRAGMA integrity_check is ok, and every
+generated, no object is orphaned, the totals agree, the per-device counters agree with the rows, PRAGMA integrity_check is ok (SQLite), and every
 device's queue is empty with nothing rejected.
 
 Figures: requests/s (delivered POSTs over the whole run, final flush included), p50 / p99 / max
@@ -36,10 +39,12 @@ is written atomically to OUT/loadtest[_kill].json; the exit status is 1 if a che
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import random
+import re
 import signal
 import socket
 import sqlite3
@@ -57,6 +62,7 @@ import numpy as np
 import pymap3d
 
 from ..core.atomic import write_json
+from ..core.pg_scratch import scratch_schema
 from ..core.provenance import versions
 from .uplink import Uplink
 
@@ -160,7 +166,7 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def issue_tokens(db: Path, names: list[str]) -> dict[str, str]:
+def issue_tokens(db: Path | str, names: list[str]) -> dict[str, str]:
     """One device token per simulated device, issued by the service's own admin command (over
     the database file, before the server starts): device name -> token."""
     cmd = [sys.executable, "-m", "dsfec_jax.service", "token", "add", "--db", str(db), "--json",
@@ -171,11 +177,12 @@ def issue_tokens(db: Path, names: list[str]) -> dict[str, str]:
     return {item["device"]: item["token"] for item in json.loads(out.stdout)}
 
 
-def start_server(db: Path, port: int, log: Path, synchronous: str = "FULL") -> subprocess.Popen:
+def start_server(db: Path | str, port: int, log: Path, synchronous: str = "FULL", workers: int = 1) -> subprocess.Popen:
+    """The service in a process group of its own (its workers included), so a kill reaches all of it."""
     cmd = [sys.executable, "-m", "dsfec_jax.service", "--db", str(db), "--port", str(port), "--log-level", "warning",
-           "--synchronous", synchronous]
+           "--synchronous", synchronous, "--workers", str(workers)]
     with open(log, "ab") as out:
-        return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
+        return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
 
 
 def wait_healthy(url: str, proc: subprocess.Popen, timeout_s: float = 30.0) -> float:
@@ -203,22 +210,37 @@ def unauthenticated_post_status(url: str) -> int:
         return e.code
 
 
-def cpu_seconds(pid: int) -> float | None:
-    """User + system CPU seconds of a process so far (Linux /proc; None elsewhere)."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    except (OSError, IndexError, ValueError):
-        return None
+def cpu_seconds(session: int) -> float | None:
+    """User + system CPU seconds so far of the processes of a session (the server and its workers;
+    Linux /proc; None elsewhere)."""
+    total, found = 0, False
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue  # a process that ended meanwhile
+        if len(fields) > 12 and fields[3] == str(session):
+            total, found = total + int(fields[11]) + int(fields[12]), True
+    return total / os.sysconf("SC_CLK_TCK") if found else None
 
 
 def stop_server(proc: subprocess.Popen) -> None:
-    proc.send_signal(signal.SIGINT)  # uvicorn's graceful shutdown
+    proc.send_signal(signal.SIGINT)  # uvicorn's graceful shutdown (the supervisor stops its workers)
     try:
         proc.wait(15)
     except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
+        pass
+    kill_group(proc)
+
+
+def kill_group(proc: subprocess.Popen) -> None:
+    """SIGKILL the server's process group (start_server made one) and reap its leader."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+
+
+RESTART_TIMEOUT_S = 120.0  # a restarted server's workers start on a machine the devices keep busy
 
 
 class Killer(threading.Thread):
@@ -231,16 +253,17 @@ class Killer(threading.Thread):
 
     def run(self):
         time.sleep(max(0.0, self.t0 + self.at_s - time.monotonic()))
-        proc = self.server["proc"]
         killed = time.monotonic()
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
+        kill_group(self.server["proc"])
         time.sleep(self.pause_s)
         self.server["proc"] = self.start_fn()
-        startup = wait_healthy(self.server["url"], self.server["proc"])
-        self.figures = {"killed_at_s": round(killed - self.t0, 3), "pause_s": self.pause_s,
-                        "restart_to_healthy_s": round(startup, 3),
-                        "outage_s": round(time.monotonic() - killed, 3)}
+        self.figures = {"killed_at_s": round(killed - self.t0, 3), "pause_s": self.pause_s}
+        try:
+            startup = wait_healthy(self.server["url"], self.server["proc"], RESTART_TIMEOUT_S)
+        except RuntimeError as e:  # said in the record and fails the run, not lost in this thread
+            self.figures["restart_error"] = str(e)
+            return
+        self.figures.update(restart_to_healthy_s=round(startup, 3), outage_s=round(time.monotonic() - killed, 3))
 
 
 # -- checks and figures --------------------------------------------------------------------------
@@ -260,19 +283,39 @@ def object_rows(b: dict) -> list[tuple]:
             for o in b["objects"]]
 
 
-def check_database(db: Path, generated: dict[str, dict]) -> dict:
-    """Every generated batch stored exactly once, with exactly its values and its objects (in the
-    service's tables: a float survives JSON and SQLite's REAL bit for bit); nothing else stored."""
+COUNTER_SQL = ("SELECT COUNT(*) FROM devices d FULL OUTER JOIN (SELECT device, COUNT(*) AS n, SUM(n_objects) AS k"
+               " FROM batches GROUP BY device) r ON d.device = r.device"
+               " WHERE d.device IS NULL OR r.device IS NULL OR d.batches != r.n OR d.objects != r.k")
+
+
+def read_database(db: Path | str) -> tuple[list[tuple], list[tuple], int, str | None, str]:
+    """(batch rows, object rows, devices whose counters disagree with the rows, SQLite's
+    integrity_check or None, journal mode) of the service's database: a SQLite file opened
+    read-only, or a PostgreSQL URL read in one read-only transaction."""
+    if isinstance(db, str) and db.startswith(("postgresql://", "postgres://")):
+        import psycopg  # the `postgres` extra: only for a PostgreSQL run
+
+        with psycopg.connect(db, connect_timeout=10) as conn:
+            conn.read_only = True
+            return (conn.execute(BATCH_SQL).fetchall(), conn.execute(OBJECT_SQL).fetchall(),
+                    conn.execute(COUNTER_SQL).fetchone()[0], None, "postgresql")
     conn = sqlite3.connect(f"file:{db}?mode=ro", uri=True)  # read-only: the check must not change what it checks
     try:
-        rows = conn.execute(BATCH_SQL).fetchall()
-        objects: dict[str, list[tuple]] = {}
-        for row in conn.execute(OBJECT_SQL):
-            objects.setdefault(row[0], []).append(row)
-        integrity = conn.execute("PRAGMA integrity_check").fetchone()[0]
-        journal = conn.execute("PRAGMA journal_mode").fetchone()[0]
+        return (conn.execute(BATCH_SQL).fetchall(), conn.execute(OBJECT_SQL).fetchall(),
+                conn.execute(COUNTER_SQL).fetchone()[0],  # FULL OUTER JOIN: SQLite 3.39 or later
+                conn.execute("PRAGMA integrity_check").fetchone()[0], conn.execute("PRAGMA journal_mode").fetchone()[0])
     finally:
         conn.close()
+
+
+def check_database(db: Path | str, generated: dict[str, dict]) -> dict:
+    """Every generated batch stored exactly once, with exactly its values and its objects (in the
+    service's tables: a float survives JSON and the database's double bit for bit); nothing else
+    stored; the per-device counters agree with the rows."""
+    rows, object_list, counter_mismatches, integrity, journal = read_database(db)
+    objects: dict[str, list[tuple]] = {}
+    for row in object_list:
+        objects.setdefault(row[0], []).append(row)
     stored = {r[0]: r for r in rows}
     missing = sorted(set(generated) - set(stored))
     extra = sorted(set(stored) - set(generated))
@@ -284,12 +327,12 @@ def check_database(db: Path, generated: dict[str, dict]) -> dict:
               "distinct_batch_ids_stored": len(stored), "missing": len(missing), "extra": len(extra),
               "batch_value_mismatches": len(wrong_batch), "object_mismatches": len(wrong_objects),
               "objects_generated": expected_objects, "objects_stored": stored_objects,
-              "orphan_objects": len(set(objects) - set(stored)),
+              "orphan_objects": len(set(objects) - set(stored)), "device_counter_mismatches": counter_mismatches,
               "integrity_check": integrity, "journal_mode": journal,
               "examples": {"missing": missing[:5], "extra": extra[:5], "batch": wrong_batch[:5], "objects": wrong_objects[:5]}}
     checks["exactly_once"] = (len(rows) == len(stored) == len(generated) and not missing and not extra
                               and not wrong_batch and not wrong_objects and stored_objects == expected_objects
-                              and not checks["orphan_objects"] and integrity == "ok")
+                              and not checks["orphan_objects"] and not counter_mismatches and integrity in ("ok", None))
     return checks
 
 
@@ -303,20 +346,23 @@ def latency_ms(seconds: list[float]) -> dict:
 
 # -- the run -------------------------------------------------------------------------------------
 def run(devices: int, seconds: float, kill_at: float | None, pause_s: float, rate: float, objects: int,
-        seed: int, workdir: Path, flush_s: float, synchronous: str = "FULL") -> dict:
-    db, port = workdir / "map.sqlite", free_port()
+        seed: int, workdir: Path, flush_s: float, synchronous: str = "FULL", db: str | None = None,
+        workers: int = 1) -> dict:
+    """The load (and kill) test against the service on a SQLite file in `workdir`, or on the
+    PostgreSQL database `db` (a URL: the caller gives it an empty schema) with `workers` processes."""
+    db, port = db or workdir / "map.sqlite", free_port()
     url = f"http://127.0.0.1:{port}"
     log = workdir / "server.log"
     fleet = [Device(i, seed, objects) for i in range(devices)]
     device_tokens = issue_tokens(db, [d.name for d in fleet])
-    server = {"url": url, "proc": start_server(db, port, log, synchronous)}
+    server = {"url": url, "proc": start_server(db, port, log, synchronous, workers)}
     try:
         startup = wait_healthy(url, server["proc"])
         no_token_status = unauthenticated_post_status(url)
         t0 = time.monotonic()
         runs = [DeviceRun(d, url, workdir / "queues" / d.name, rate, t0 + seconds, flush_s, device_tokens[d.name])
                 for d in fleet]
-        killer = Killer(server, kill_at, pause_s, t0, lambda: start_server(db, port, log, synchronous)) \
+        killer = Killer(server, kill_at, pause_s, t0, lambda: start_server(db, port, log, synchronous, workers)) \
             if kill_at is not None else None
         for r in runs:
             r.start()
@@ -327,7 +373,7 @@ def run(devices: int, seconds: float, kill_at: float | None, pause_s: float, rat
         done = time.monotonic()
         if killer:
             killer.join()
-        server_cpu = cpu_seconds(server["proc"].pid)  # the last server process's (the restarted one after a kill)
+        server_cpu = cpu_seconds(server["proc"].pid)  # the last server's (the restarted one after a kill), workers included
     finally:
         stop_server(server["proc"])  # never leave a server behind, whatever failed
 
@@ -339,11 +385,13 @@ def run(devices: int, seconds: float, kill_at: float | None, pause_s: float, rat
     checks["queues_empty"] = all(r.flushed and not r.uplink.pending() for r in runs)
     checks["rejected_or_conflicts"] = counts["rejected"] + counts["conflicts"]
     checks["post_without_token_status"] = no_token_status
+    checks["restarted"] = killer is None or "restart_error" not in killer.figures
     checks["passed"] = (checks["exactly_once"] and checks["queues_empty"] and checks["rejected_or_conflicts"] == 0
-                        and no_token_status == 401)
+                        and no_token_status == 401 and checks["restarted"])
     return {
         "figures": {"devices": devices, "load_seconds": seconds, "rate_per_device_hz": rate or "closed loop",
-                    "synchronous": synchronous,
+                    "synchronous": synchronous, "store": "sqlite" if isinstance(db, Path) else "postgresql",
+                    "server_workers": workers,
                     "server_startup_s": round(startup, 3), "wall_incl_flush_s": round(done - t0, 3),
                     "posts_delivered": delivered, "requests_per_s": round(delivered / (done - t0), 1),
                     "frames_per_s_generated": round(len(generated) / seconds, 1),
@@ -353,10 +401,15 @@ def run(devices: int, seconds: float, kill_at: float | None, pause_s: float, rat
                     "device_queue_write_ms_per_frame": round(1e3 * sum(r.send_s for r in runs) / max(len(generated), 1), 3),
                     "max_queued_per_device": max(r.max_queued for r in runs),
                     "uplink_counts": counts, "kill": killer.figures if killer else None,
-                    "db_bytes": db.stat().st_size},
+                    "db_bytes": db.stat().st_size if isinstance(db, Path) else None},
         "checks": checks,
         "server_log_tail": log.read_text(errors="replace")[-2000:],
     }
+
+
+def without_password(value):
+    """A command-line value with the password of a URL in it (user:PASSWORD@) starred out."""
+    return re.sub(r"(://[^:/@]*:)[^@]*@", r"\1***@", value) if isinstance(value, str) else value
 
 
 def main(argv=None) -> int:
@@ -371,6 +424,10 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--synchronous", default="FULL", choices=["FULL", "NORMAL"],
                    help="the server's SQLite synchronous mode (FULL: fsync before each 201)")
+    p.add_argument("--db", default=None, metavar="URL",
+                   help="a PostgreSQL database (postgresql://...): the service stores into a fresh schema of it, dropped "
+                        "afterwards; default: a SQLite file in the work folder")
+    p.add_argument("--workers", type=int, default=1, help="server processes (PostgreSQL only)")
     p.add_argument("--flush", type=float, default=60.0, help="seconds each device may take to empty its queue at the end")
     p.add_argument("--workdir", type=Path, default=None,
                    help="keep the database, queues and server log here (default: a temporary folder, removed)")
@@ -378,12 +435,19 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.devices < 1 or a.seconds <= 0 or (a.kill_at is not None and not 0 < a.kill_at < a.seconds):
         p.error("need --devices >= 1, --seconds > 0 and 0 < --kill-at < --seconds")
-    with tempfile.TemporaryDirectory(prefix="dsfec-loadtest-") as tmp:
+    if a.db is not None and not a.db.startswith(("postgresql://", "postgres://")):
+        p.error(f"--db {a.db!r}: expected a postgresql:// URL (without --db the test uses a SQLite file)")
+    if a.workers != 1 and a.db is None:
+        p.error("--workers needs --db postgresql://... (the service runs one process on SQLite)")
+    with tempfile.TemporaryDirectory(prefix="dsfec-loadtest-") as tmp, \
+            (scratch_schema(a.db, "loadtest") if a.db else contextlib.nullcontext()) as schema_url:
         workdir = a.workdir or Path(tmp)
         workdir.mkdir(parents=True, exist_ok=True)
-        result = run(a.devices, a.seconds, a.kill_at, a.pause, a.rate, a.objects, a.seed, workdir, a.flush, a.synchronous)
-    record = {"command": " ".join(["python -m dsfec_jax.edge.loadtest", *(argv if argv is not None else sys.argv[1:])]),
-              "seed": a.seed, "options": {k: str(v) if isinstance(v, Path) else v for k, v in vars(a).items()},
+        result = run(a.devices, a.seconds, a.kill_at, a.pause, a.rate, a.objects, a.seed, workdir, a.flush, a.synchronous,
+                     schema_url, a.workers)
+    argv = [without_password(v) for v in (argv if argv is not None else sys.argv[1:])]
+    record = {"command": " ".join(["python -m dsfec_jax.edge.loadtest", *argv]), "seed": a.seed,
+              "options": {k: str(v) if isinstance(v, Path) else without_password(v) for k, v in vars(a).items()},
               "versions": versions(("fastapi", "uvicorn", "starlette", "pydantic", "pymap3d", "numpy", "dsfec_jax")),
               "machine": {"cpus": os.cpu_count(), "load_average_1_5_15min_at_end": os.getloadavg(), "sqlite": sqlite3.sqlite_version,
                           "workdir": str(a.workdir) if a.workdir else "(temporary, removed)"}, **result}

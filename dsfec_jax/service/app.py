@@ -21,8 +21,9 @@
 Reads (/objects, /tracks) are open or need a read/admin token (Access.open_reads; server.py picks
 open only on a loopback bind). Writes need a device token unless Access.write_auth is off.
 
-Endpoints that touch SQLite run in FastAPI's thread pool, so a slow commit (an fsync) blocks one
-worker thread, not the event loop. The store gives each thread its connection.
+Endpoints that touch the database run in FastAPI's thread pool, so a slow commit (an fsync) blocks
+one worker thread, not the event loop. The store gives each thread its connection (SQLite) or
+lends it one from its pool (PostgreSQL).
 """
 
 from __future__ import annotations
@@ -49,7 +50,8 @@ from . import tokens
 from ..core.loopback import LOOPBACK_NAMES
 from .guards import BodyGuard, HostAllowList
 from .schema import FrameBatch, field_errors
-from .store import Conflict, Store
+from .sql_store import Conflict, SqlStore
+from .store import open_store
 
 STATIC = Path(__file__).resolve().parent / "static"
 MAX_BODY_BYTES = 2 * 1024 * 1024  # a full batch of MAX_OBJECTS objects is ~0.3 MB
@@ -72,10 +74,11 @@ class Access:
 
 
 def create_app(db_path: str | Path, synchronous: str = "FULL", access: Access = Access()) -> FastAPI:
-    """The service over the SQLite database at `db_path` (created if missing). `synchronous`:
-    "FULL" acknowledges a batch once it is fsynced, "NORMAL" once a killed process cannot lose it
-    (store.py). `access`: authentication, hosts, docs, limits."""
-    store = Store(db_path, synchronous)
+    """The service over the database `db_path`: a SQLite file (created if missing) or a
+    postgresql:// URL (store.open_store). `synchronous`: "FULL" acknowledges a batch once it is on
+    disk, "NORMAL" once a killed service cannot lose it (store.py, pg_store.py). `access`:
+    authentication, hosts, docs, limits."""
+    store = open_store(db_path, synchronous)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
@@ -83,7 +86,7 @@ def create_app(db_path: str | Path, synchronous: str = "FULL", access: Access = 
             log.warning("write authentication is OFF (--no-auth): anyone who reaches the port can post as any device")
         elif not any(t["role"] == "device" and t["revoked"] is None for t in tokens.listing(store)):
             log.warning("no device token issued yet: every post will be refused (401); issue one with "
-                        "`dsfec serve token add --db %s --device NAME`", store.path)
+                        "`dsfec serve token add --db %s --device NAME`", store.name)
         sweeper = asyncio.create_task(_retention(store, access)) if access.retention_days else None
         yield
         if sweeper is not None:
@@ -141,7 +144,7 @@ def create_app(db_path: str | Path, synchronous: str = "FULL", access: Access = 
 
     @app.get("/health")
     def health() -> dict:
-        return {"status": "ok", "journal_mode": store.journal_mode(), "synchronous": store.synchronous,
+        return {"status": "ok", "store": store.kind, "journal_mode": store.journal_mode(), "synchronous": store.synchronous,
                 "write_auth": access.write_auth, "open_reads": access.open_reads, **store.counts()}
 
     @app.get("/", include_in_schema=False)
@@ -154,7 +157,7 @@ def create_app(db_path: str | Path, synchronous: str = "FULL", access: Access = 
 _CHALLENGE = {"WWW-Authenticate": "Bearer"}
 
 
-def _principal(store: Store, request: Request, allowed, refusal: str) -> tokens.Principal:
+def _principal(store: SqlStore, request: Request, allowed, refusal: str) -> tokens.Principal:
     principal = tokens.authenticate(store, request.headers.get("authorization"))
     if principal is None:
         raise HTTPException(401, detail="a valid token is required (Authorization: Bearer <token>)", headers=_CHALLENGE)
@@ -163,7 +166,7 @@ def _principal(store: Store, request: Request, allowed, refusal: str) -> tokens.
     return principal
 
 
-def _accept(store: Store, access: Access, authorization: str | None, body: bytes) -> tuple[int, dict]:
+def _accept(store: SqlStore, access: Access, authorization: str | None, body: bytes) -> tuple[int, dict]:
     """POST /detections in the thread pool: authenticate, validate, store -> (status, reply).
     Authentication comes first: without a token nothing about the body is answered."""
     principal = tokens.authenticate(store, authorization) if access.write_auth else None
@@ -195,7 +198,7 @@ def _errors(lines: list[str]) -> dict:
     return {"detail": "; ".join(lines), "errors": lines}
 
 
-async def _retention(store: Store, access: Access) -> None:
+async def _retention(store: SqlStore, access: Access) -> None:
     """Every retention_every_s: delete batches older than retention_days (store.delete works in
     bounded transactions, so posts go on meanwhile)."""
     while True:

@@ -1,13 +1,14 @@
 """The map service's command line, shared by `dsfec serve` and `python -m dsfec_jax.service`:
 
     dsfec serve --db map.sqlite [--host 127.0.0.1 --port 8000 --synchronous FULL --log-level info]
+    dsfec serve --db postgresql://USER@HOST/DB --workers 4    # PostgreSQL (the `postgres` extra)
     dsfec serve token add --db map.sqlite --device cam-01      # prints the new token once
     dsfec serve token add --db map.sqlite --role read|admin
     dsfec serve token list --db map.sqlite
     dsfec serve token revoke --db map.sqlite ID
 
 argparse only at import (the CLI builds every command's parser on start); the server's modules
-load when a command runs. Token commands work on the database file directly (run them on the
+load when a command runs. Token commands work on the database directly (the SQLite file: run them on the
 server's machine; a running server sees a new or revoked token on its next request).
 """
 
@@ -22,7 +23,10 @@ LOG_LEVELS = ("critical", "error", "warning", "info", "debug", "trace")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The server's options on `p`, and the optional `token` admin command under it."""
-    p.add_argument("--db", help="SQLite database file (created if missing)")
+    p.add_argument("--db", help="SQLite database file (created if missing), or a PostgreSQL URL "
+                                "postgresql://USER[:PASSWORD]@HOST[:PORT]/DB[?options] (its tables are created if missing)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="server processes sharing the port (PostgreSQL only: SQLite takes one writer)")
     p.add_argument("--host", default="127.0.0.1",
                    help="interface to bind (default loopback only; 0.0.0.0 listens on every interface: see README)")
     p.add_argument("--port", type=int, default=8000)
@@ -72,7 +76,7 @@ def run(args, prog: str) -> int:
     try:
         access = resolve_access(args.host, args.no_auth, args.reads, args.allowed_host, args.docs, args.retention_days)
         serve(args.db, args.host, args.port, args.log_level, args.synchronous, access, args.access_log,
-              args.ssl_keyfile, args.ssl_certfile)
+              args.ssl_keyfile, args.ssl_certfile, args.workers)
     except ValueError as err:
         sys.exit(f"{prog}: {err}")
     return 0
@@ -80,10 +84,10 @@ def run(args, prog: str) -> int:
 
 def _token_command(args, prog: str) -> int:
     from . import tokens
-    from .store import Store
+    from .store import open_store
 
     try:
-        store = Store(args.db)
+        store = open_store(args.db)
     except ValueError as err:
         sys.exit(f"{prog} token: {err}")
     try:
@@ -91,7 +95,7 @@ def _token_command(args, prog: str) -> int:
             print(json.dumps(tokens.listing(store), indent=1))
         elif args.token_action == "revoke":
             if not tokens.revoke(store, args.id):
-                sys.exit(f"{prog} token revoke: no live token with id {args.id!r} in {args.db}")
+                sys.exit(f"{prog} token revoke: no live token with id {args.id!r} in {store.name}")
             print(f"revoked {args.id}")
         else:
             issued = [dict(zip(("id", "token"), tokens.issue(store, args.role, device)), role=args.role, device=device)

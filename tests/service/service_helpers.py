@@ -16,6 +16,7 @@ import uvicorn
 
 from dsfec_jax.service.app import Access, create_app
 from dsfec_jax.service.server import guarded_config
+from dsfec_jax.service.store import open_store
 
 LAT0, LON0 = 49.0069, 8.4037  # Karlsruhe, the street benchmark's origin
 T0 = 1_790_000_000.0          # 2026-09-21 UTC, UNIX seconds
@@ -31,7 +32,8 @@ OPEN = Access(write_auth=False)  # the tests of storage and queries; test_auth.p
 
 
 class LiveServer:
-    """`with LiveServer(db) as srv: srv.url` - the service under uvicorn in a daemon thread, with
+    """`with LiveServer(db) as srv: srv.url` - the service under uvicorn in a daemon thread (db: a
+    SQLite path or a postgresql:// URL), with
     the real server's connection guards (server.guarded_config). Stops on exit; may be started
     again on the same port (an outage and a recovery). `access`: write auth off by default."""
 
@@ -63,6 +65,15 @@ class LiveServer:
 
     def __exit__(self, *exc):
         self.stop()
+
+
+def stored_rows(db, sql: str, args=()) -> list[tuple]:
+    """The rows of a query on the service's database (a SQLite path or a postgresql:// URL)."""
+    store = open_store(db)
+    try:
+        return [tuple(r) for r in store.snapshot_rows(sql, args)]
+    finally:
+        store.close()
 
 
 def make_object(k: int = 0, cls: str = "car", lat: float = LAT0, lon: float = LON0) -> dict:

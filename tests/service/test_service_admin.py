@@ -19,8 +19,9 @@ from dsfec_jax.service import tokens
 from dsfec_jax.service.app import Access
 from dsfec_jax.service.schema import FrameBatch
 from dsfec_jax.service.server import resolve_access
-from dsfec_jax.service.store import Store
-from service_helpers import LiveServer, get, make_batch, post
+from dsfec_jax.service.store import Store, open_store
+from service_helpers import LiveServer, get, make_batch, post, stored_rows
+from stores import db, module_db  # noqa: F401 (pytest fixtures)
 
 
 @pytest.fixture
@@ -38,17 +39,19 @@ def _cli(capsys):
     return run
 
 
-def test_token_commands_issue_list_and_revoke_and_store_only_hashes(tmp_path, _cli):
-    db = str(tmp_path / "map.sqlite")
+def test_token_commands_issue_list_and_revoke_and_store_only_hashes(db, _cli):
+    db = str(db)
     out = _cli("token", "add", "--db", db, "--device", "cam-01", "--device", "cam-02", "--json")
     assert out.returncode == 0, out.stderr
     issued = json.loads(out.stdout)
     assert [(i["role"], i["device"]) for i in issued] == [("device", "cam-01"), ("device", "cam-02")]
     admin = _cli("token", "add", "--db", db, "--role", "admin")
     assert admin.returncode == 0 and admin.stdout.startswith("dsfec_") and "shown once" in admin.stderr
-    with sqlite3.connect(db) as conn:
-        stored = conn.execute("SELECT sha256 FROM tokens").fetchall()
-        dump = "\n".join(conn.iterdump())
+    stored = stored_rows(db, "SELECT sha256 FROM tokens")
+    dump = "\n".join(map(str, stored_rows(db, "SELECT * FROM tokens")))
+    if not db.startswith("postgresql://"):
+        with sqlite3.connect(db) as conn:
+            dump = "\n".join(conn.iterdump())
     assert {h for (h,) in stored} == {hashlib.sha256(t.encode()).hexdigest()
                                       for t in [i["token"] for i in issued] + [admin.stdout.strip()]}
     assert not any(i["token"].split("_", 2)[2] in dump for i in issued)  # no secret in the file
@@ -70,10 +73,10 @@ def test_no_auth_is_refused_off_loopback_and_reads_are_open_only_on_loopback():
 
 
 @pytest.fixture(scope="module")
-def closed(tmp_path_factory):
-    """A server with reads behind tokens, and its tokens."""
-    db = tmp_path_factory.mktemp("admin") / "map.sqlite"
-    store = Store(db)
+def closed(module_db):
+    """A server with reads behind tokens, and its tokens (on each store)."""
+    db = module_db
+    store = open_store(db)
     names = {"dev-a": ("device", "dev-a"), "dev-b": ("device", "dev-b"), "reader": ("read", None), "admin": ("admin", None)}
     issued = {k: tokens.issue(store, *v)[1] for k, v in names.items()}
     store.close()
@@ -125,16 +128,16 @@ def test_export_and_delete_need_an_admin_token(closed):
     assert post(closed.url, make_batch(0, "dev-a", t=closed.t0), token=closed.tokens["dev-a"])[0] == 201  # posts go on
 
 
-def test_retention_deletes_old_batches_in_bounded_transactions(tmp_path, monkeypatch):
-    from dsfec_jax.service import store as store_module
+def test_retention_deletes_old_batches_in_bounded_transactions(db, monkeypatch):
+    from dsfec_jax.service import sql_store
 
-    monkeypatch.setattr(store_module, "DELETE_CHUNK", 4)
-    store = Store(tmp_path / "map.sqlite")
+    monkeypatch.setattr(sql_store, "DELETE_CHUNK", 4)
+    store = open_store(db)
     now = time.time()
     for i in range(10):
         store.put(FrameBatch.model_validate(make_batch(i, n_objects=1, t=now - 86400 * (10 - i))))  # 10..1 days old
     store.close()
-    with LiveServer(tmp_path / "map.sqlite", access=Access(retention_days=3.5)) as srv:
+    with LiveServer(db, access=Access(retention_days=3.5)) as srv:
         deadline = time.monotonic() + 5
         while get(srv.url, "/health")[1]["batches"] != 3 and time.monotonic() < deadline:
             time.sleep(0.05)

@@ -1,6 +1,7 @@
 """The map service over real HTTP (uvicorn on a free localhost port): POST /detections' answers
 (stored, duplicate, conflict, schema errors naming the field with nothing stored), the bbox/since
-query, ego tracks, WAL mode, body limits, and exactly-once storage under concurrent re-posts."""
+query, ego tracks, WAL mode, body limits, and exactly-once storage under concurrent re-posts.
+The tests of storing and reading run on both stores (`fresh`: stores.py's `db`)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ import urllib.parse
 
 import pytest
 
-from service_helpers import DELETE, LAT0, LON0, T0, LiveServer, changed, get, make_batch, post
+from service_helpers import DELETE, LAT0, LON0, T0, LiveServer, changed, get, make_batch, post, stored_rows
+from stores import db  # noqa: F401 (pytest fixtures)
 
 
 @pytest.fixture(scope="module")
@@ -22,8 +24,8 @@ def server(tmp_path_factory):
 
 
 @pytest.fixture
-def fresh(tmp_path):
-    with LiveServer(tmp_path / "map.sqlite") as srv:
+def fresh(db):
+    with LiveServer(db) as srv:
         yield srv
 
 
@@ -172,9 +174,10 @@ def test_tracks_are_per_device_in_time_order(fresh):
     assert [f["geometry"]["coordinates"] for f in recent] == [[LON0, LAT0 + 2e-4]]
 
 
-def test_the_database_is_in_wal_mode(fresh):
-    assert post(fresh.url, make_batch(0))[0] == 201
-    assert get(fresh.url, "/health")[1]["journal_mode"] == "wal"
+def test_the_database_is_in_wal_mode(tmp_path):
+    with LiveServer(tmp_path / "map.sqlite") as fresh:
+        assert post(fresh.url, make_batch(0))[0] == 201
+        assert get(fresh.url, "/health")[1]["journal_mode"] == "wal"
     with sqlite3.connect(fresh.db_path) as conn:  # the mode is a property of the file, not of one connection
         assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
         assert conn.execute("SELECT COUNT(*) FROM objects").fetchone()[0] == 3
@@ -196,9 +199,8 @@ def test_concurrent_reposts_store_every_batch_exactly_once(fresh):
     [t.start() for t in threads]
     [t.join() for t in threads]
     assert all(sorted(s) == [200, 201] for s in statuses.values()), statuses
-    with sqlite3.connect(fresh.db_path) as conn:
-        assert conn.execute("SELECT COUNT(*), COUNT(DISTINCT batch_id) FROM batches").fetchone() == (40, 40)
-        assert conn.execute("SELECT COUNT(*) FROM objects").fetchone()[0] == sum(i % 5 for i in range(40))
+    assert stored_rows(fresh.db_path, "SELECT COUNT(*), COUNT(DISTINCT batch_id) FROM batches") == [(40, 40)]
+    assert stored_rows(fresh.db_path, "SELECT COUNT(*) FROM objects") == [(sum(i % 5 for i in range(40)),)]
 
 
 def test_the_map_page_and_its_script_are_served(server):
