@@ -21,7 +21,7 @@ from dsfec_jax.train.loop import checkpoints
 
 CHECKS = Path(__file__).with_name("parallel_checks.py")
 ROOT = Path(__file__).resolve().parents[2]
-CHILD_S = 600  # a child that hangs (a collective waiting on a dead peer) fails the test, not the suite
+CHILD_S = 1800  # a child that hangs (a collective waiting on a dead peer) fails the test, not the suite
 FAMILIES = ("dsfec", "radarnext", "yolo_rd", "camera")
 
 
@@ -46,15 +46,15 @@ def test_the_sharded_step_is_the_one_device_step_on_the_global_batch(two_devices
     got = two_devices[family]
     assert got["rows"] == 2 and got["batch_sharded"] and got["state_replicated"]
     np.testing.assert_allclose(got["losses_2"], got["losses_1"], rtol=1e-5)
-    assert got["params_moved"] > 1e-4  # the steps trained: agreement is not two untouched states
-    assert got["params"] < 1e-4 and got["batch_stats"] < 1e-4, got
+    assert got["params"] < 1e-5 and got["batch_stats"] < 1e-4, got
+    assert got["params_moved"] > 100 * got["params"]  # the steps trained: agreement is not two untouched states
 
 
 def test_a_sharded_run_resumes_exactly_and_on_another_device_count(two_devices):
     got = two_devices["resume"]
     assert got["step"] == [3, 3, 3]
     assert got["resumed"] == 0.0 and got["losses"]["resumed"] == got["losses"]["straight"]
-    assert got["moved"] < 1e-4  # resumed on 1 device: the same global batch, another summation order
+    assert got["moved"] < 1e-5  # resumed on 1 device: the same global batch, another summation order
     np.testing.assert_allclose(got["losses"]["moved"], got["losses"]["straight"], rtol=1e-5)
     assert got["parallel"] == {"devices": 2, "processes": 1, "platform": "cpu", "mesh": {"axes": ["data"], "shape": [2]}}
     assert got["resume_parallel"]["devices"] == 1
@@ -91,7 +91,7 @@ def test_two_processes_train_as_one_and_only_process_0_writes(two_devices, tmp_p
     losses = [json.loads(l)["loss"] for l in (runs[0] / "metrics.jsonl").read_text().splitlines()]
     np.testing.assert_allclose(losses, two_devices["resume"]["losses"]["straight"], rtol=1e-5)
     ours, theirs = (checkpoint.load(checkpoints(r)[-1])["params"] for r in (runs[0], straight))
-    assert max(np.max(np.abs(a - b)) for a, b in zip(jax.tree.leaves(ours), jax.tree.leaves(theirs))) < 1e-4
+    assert max(np.max(np.abs(a - b)) for a, b in zip(jax.tree.leaves(ours), jax.tree.leaves(theirs))) < 1e-5
 
 
 def test_flags_that_do_not_fit_are_refused_by_name():
