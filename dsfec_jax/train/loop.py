@@ -51,7 +51,7 @@ from .step import init_state, make_train_step
 log = logging.getLogger(__name__)
 
 # run.json fields that say how a run was launched, not what it trains: a resume may differ in them
-LAUNCH_FIELDS = ("command", "versions", "resumes", "parallel")  # parallel: the global batch stays
+LAUNCH_FIELDS = ("command", "versions", "resumes", "parallel")  # parallel: devices and mesh (same global batch)
 SHOWN_DIFFERENCES = 8  # a changed model differs in many config fields: name the first few
 # What the first step of a run (and of each training window) costs before the bar moves: XLA
 # compiling the step. Measured on the 2-core dev box (`dsfec train`, `python -m search.nas`):
