@@ -45,3 +45,16 @@ def _int(text: str) -> int:
         return int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+
+
+def add_parallel_flags(p: argparse.ArgumentParser) -> None:
+    """Data-parallel training (dsfec_jax.train.parallel): devices of this process, and the processes of a
+    run on several hosts."""
+    p.add_argument("--devices", type=positive_int, default=None,
+                   help="local devices to train on, the global batch split across them (default: all of this "
+                        "process's devices; on the CPU, N > 1 makes N host devices)")
+    p.add_argument("--coordinator", default=None, metavar="HOST:PORT",
+                   help="train on several processes/hosts (jax.distributed): process 0's address, or 'auto' for "
+                        "a cluster launcher JAX detects (SLURM, Open MPI); only process 0 writes the run directory")
+    p.add_argument("--num-processes", type=positive_int, default=None, help="with --coordinator: processes in the run")
+    p.add_argument("--process-id", type=non_negative_int, default=None, help="with --coordinator: this process, 0 .. N-1")

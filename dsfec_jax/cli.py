@@ -25,7 +25,7 @@ import json
 import sys
 from pathlib import Path
 
-from .argtypes import command_line, non_negative_int, positive_int
+from .argtypes import add_parallel_flags, command_line, non_negative_int, positive_int
 from .cli_edge import EDGE_COMMANDS, add_commands as add_edge_commands
 from .core.defaults import POINT_SCORE_THRESHOLD, RUN_PILLARS
 
@@ -65,6 +65,14 @@ def common(p: argparse.ArgumentParser, split: str) -> None:
                         "(a multiple of 32; default 416)")
 
 
+def start_parallel(args) -> None:
+    """--devices and --coordinator (commands that train) take effect before anything runs JAX."""
+    from .train import parallel
+
+    if hasattr(args, "devices"):
+        parallel.start_or_exit(args, f"dsfec {args.command}")
+
+
 def parse(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(prog="dsfec", description="train, evaluate and run zoo detectors")
     sub = p.add_subparsers(dest="command", required=True)
@@ -89,6 +97,7 @@ def parse(argv=None) -> argparse.Namespace:
     t.add_argument("--window-sampling", default=None, choices=("cycle", "objects"),
                    help="point models: cycle the windows (default), or favour windows holding a box "
                         "(80 %% of steps; sparse scenes)")
+    add_parallel_flags(t)
     sh = sub.add_parser("ship", help="package a trained run's weights into dsfec_jax/weights with a manifest")
     sh.add_argument("--model", required=True)
     sh.add_argument("--run-dir", required=True)
@@ -237,11 +246,22 @@ def training_schedule(args, family):
     return sched
 
 
+def check_mesh(args, batch_size: int) -> None:
+    """--devices and --batch-size against the mesh, before any data is loaded."""
+    from .train import parallel
+
+    try:
+        parallel.layout().check_batch(batch_size)
+    except parallel.ParallelError as err:
+        sys.exit(f"dsfec {args.command}: {err}")
+
+
 def run_train(args) -> int:
     from . import zoo
 
     modality, cfg, overrides = resolved(args)
     sched = training_schedule(args, zoo.family_of(cfg))
+    check_mesh(args, sched.batch_size)
     info = {"command": command_line(args),
             "data": {"source": args.data, "split": args.split}}
     final = modality.commands.train(args, cfg, overrides, sched, info)
@@ -441,6 +461,7 @@ def main(argv=None) -> int:
     # the watchdog speaks for every wait no stage or bar covers (a restart below ends it with the process)
     with progress.watched(f"dsfec {args.command}"):
         prepare_xla_process()  # XLA's settings first: may restart this command (core/host_memory.py)
+        start_parallel(args)
         return run_command(args)
 
 

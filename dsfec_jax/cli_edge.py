@@ -30,7 +30,7 @@ import os
 import sys
 from pathlib import Path
 
-from .argtypes import command_line, positive_int
+from .argtypes import add_parallel_flags, command_line, positive_int
 from .service.options import add_arguments as add_service_arguments
 
 EDGE_COMMANDS = ("edge", "serve", "depth")
@@ -80,6 +80,7 @@ def add_commands(sub) -> None:
     d.add_argument("--init", default=None, metavar="PATH",
                    help="train: start from these weights or checkpoint (same --input): continue or fine-tune")
     d.add_argument("--json", action="store_true")
+    add_parallel_flags(d)
 
 
 def main(args) -> int:

@@ -28,6 +28,7 @@ import dataclasses
 import datetime
 import json
 import logging
+import os
 import time
 from pathlib import Path
 from typing import Callable
@@ -42,14 +43,15 @@ from ..data.batches import BatchStream
 from ..data.prefetch import Prefetcher
 from .dropped_boxes import DroppedBoxes
 from .loss_watch import LossWatch, NonFiniteLoss
+from . import parallel
 from .schedules import Schedule, optimizer
-from .step import batch_on_device, init_state, make_train_step
+from .step import init_state, make_train_step
 
 
 log = logging.getLogger(__name__)
 
 # run.json fields that say how a run was launched, not what it trains: a resume may differ in them
-LAUNCH_FIELDS = ("command", "versions", "resumes")
+LAUNCH_FIELDS = ("command", "versions", "resumes", "parallel")  # parallel: devices and mesh (same global batch)
 SHOWN_DIFFERENCES = 8  # a changed model differs in many config fields: name the first few
 # What the first step of a run (and of each training window) costs before the bar moves: XLA
 # compiling the step. Measured on the 2-core dev box (`dsfec train`, `python -m search.nas`):
@@ -210,19 +212,27 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     `window_detectors[i]` (same weights, grid = the stream's window i) trains on window i.
     `init_variables` (trained variables of this or a related network) seed a fresh run module by
     module (see warm_start); a resumed run ignores them."""
-    spec.run_dir.mkdir(parents=True, exist_ok=True)
+    layout = parallel.layout()  # data parallel over the mesh (train/parallel.py); one device: as before
+    layout.check_batch(stream.batch_size)
+    run_info = {**run_info, "parallel": layout.record()}
+    writer = parallel.is_writer()
+    if writer:
+        spec.run_dir.mkdir(parents=True, exist_ok=True)
     previous = _started_with(spec.run_dir, run_info, type(detector.config))
     # a detector may bring its own optimizer (a sandwich-sampled supernet accumulates over its cycle)
     tx = (detector.optimizer if hasattr(detector, "optimizer") else optimizer)(spec.schedule, spec.total_steps)
     with progress.stage(f"initialising {detector.name} (compiling its initialisation)", enabled=spec.progress):
-        state = _restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed), init_variables))
+        state = layout.replicate(_restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed),
+                                                                   init_variables)))
     start = int(state["step"])
-    _record_start(spec.run_dir, run_info, previous, start)
     log_path = spec.run_dir / "metrics.jsonl"
-    _trim_metrics(log_path, start)
+    if writer:
+        _record_start(spec.run_dir, run_info, previous, start)
+        _trim_metrics(log_path, start)
     # a detector may bring its own step (a depth supernet keeps its idle blocks still)
     step_fns = [d.make_train_step(tx) if hasattr(d, "make_train_step") else make_train_step(d, tx)
                 for d in (window_detectors or [detector])]
+    step_fns = [layout.step(f) for f in step_fns]
     end = spec.total_steps if spec.stop_at is None else min(spec.stop_at, spec.total_steps)
     best = _best_score(spec.run_dir, best_key)
     scores = None
@@ -231,9 +241,9 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     t0 = time.perf_counter()
 
     def ready_batch(step: int) -> dict:  # built, and copied into XLA buffers, in the worker
-        return batch_on_device(stream.batch(step))
+        return layout.batch_on_devices(stream.batch(step))
 
-    with open(log_path, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches:
+    with open(log_path if writer else os.devnull, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches:
         bar = tqdm(batches, initial=start, total=end, disable=not spec.progress, desc=detector.name)
         compiled = set()  # the step functions (one per window) that have run: the first call compiles
         for step, batch in bar:
@@ -263,16 +273,16 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                                     + ("" if scores else " (the first validation compiles the predictor)"),
                                     enabled=spec.progress):
                     if before_eval is not None:
-                        state = before_eval(state)
-                    scores = evaluate(state)
+                        state = layout.replicate(before_eval(layout.on_host(state)))
+                    scores = evaluate(layout.on_host(state))
                 log.write(json.dumps({"step": done, "eval": scores}) + "\n")
                 log.flush()
                 score = scores.get(best_key)  # None: nothing to score (e.g. no ground truth)
-                if score is not None and score > best:
+                if score is not None and score > best and writer:
                     best = scores[best_key]
                     checkpoint.save(spec.run_dir / "checkpoints" / "best.msgpack", jax.device_get(state),
                                     {"step": done, best_key: best, "eval": scores})
-            if save_step:
+            if save_step and writer:
                 _save(spec, state, done, {"loss": loss})
     return state, scores
 

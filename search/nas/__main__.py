@@ -28,7 +28,9 @@ import argparse
 import shlex
 import sys
 
+from dsfec_jax.argtypes import positive_int
 from dsfec_jax.core import progress
+from dsfec_jax.train import parallel
 
 from .run import PROFILES, run_nas
 from .spaces import SPACES
@@ -54,6 +56,9 @@ def parse(argv: list[str]) -> argparse.Namespace:
                    help="SPOS's subnet per batch: uniform, or the sandwich rule (largest, smallest, 2 uniform, "
                         "accumulated into one update; DSFEC-style spaces); kept in RUN_DIR/supernet/run.json")
     p.add_argument("--run-dir", default=None)
+    p.add_argument("--devices", type=positive_int, default=None,
+                   help="local devices the supernet trains on, its batch split across them (default: all; on "
+                        "the CPU, N > 1 makes N host devices): dsfec_jax.train.parallel")
     p.add_argument("--no-progress", action="store_true")
     p.add_argument("--register", default=None, metavar="NAME",
                    help="register the best subnet as zoo model NAME (e.g. yolov8n_adapter_search: models/yolo_rd/searched.json)")
@@ -88,6 +93,7 @@ def main(argv=None) -> int:
     limits = {k: v for k, v in (("params", args.max_params), ("gflops", args.max_gflops),
                                 ("latency_ms", args.max_latency_ms)) if v is not None}
     run_dir = args.run_dir or f"runs/nas/{args.space}_{args.profile}_{args.strategy}"
+    parallel.start_or_exit(args, "python -m search.nas")  # before anything runs JAX
     with progress.watched("search.nas", enabled=not args.no_progress):
         report = run_nas(args.space, run_dir, args.profile, args.strategy, limits, args.seed, args.objective,
                          command=shlex.join(["python", "-m", "search.nas", *argv]), progress=not args.no_progress,

@@ -46,6 +46,7 @@ from ...core import checkpoint
 from .depth import WEIGHTS_NAME, MonodepthPredictor, load_depth_variables, resize_image, save_depth_weights
 from ...models.depth.loss import MonodepthLoss, monodepth_loss
 from ...train.loop import RunSpec, run_record, train
+from ...train.parallel import is_writer
 from ...train.schedules import Schedule
 
 DECAY_AT = (3 / 5, 4 / 5)   # monodepth_main.py: lr, lr / 2, lr / 4
@@ -221,7 +222,7 @@ command line, for run.json (and the shipped weights' manifest: `dsfec depth ship
     variables = {"params": jax.device_get(state["params"])}
     reached = int(state["step"])
     weights = None
-    if reached >= steps:
+    if reached >= steps and is_writer():  # process 0 of a run on several hosts (train/parallel.py)
         weights = run_dir / WEIGHTS_NAME
         run = json.loads((run_dir / "run.json").read_text())  # as stored when the run started
         save_depth_weights(weights, config, variables, {**run, "train_frames": frames}, step=reached)
