@@ -223,13 +223,12 @@ def schedule_preset(profile: str, family) -> str:
 
 
 def training_schedule(args, family):
-    """The schedule of --schedule with --batch-size and --decay-at applied."""
+    """The schedule of --schedule with --batch-size, --decay-at and --ema (default: the family's) applied."""
     from .train.schedules import get_schedule
 
     name = schedule_preset(args.schedule, family)
     changes = {"batch_size": args.batch_size} if args.batch_size else {}
-    if args.ema is not None:
-        changes["ema"] = args.ema
+    changes["ema"] = family.weight_ema if args.ema is None else args.ema  # ultralytics' EMA for the YOLOs
     if args.decay_at:
         try:
             changes["decay_at"] = tuple(float(f) for f in args.decay_at.split(","))

@@ -15,8 +15,6 @@ an EMA_KEY entry, so checkpoints keep it and a resume continues the same average
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
 import optax
@@ -36,9 +34,12 @@ def decay(updates):
     return -DECAY * jnp.expm1(-jnp.asarray(updates, jnp.float32) / TAU)
 
 
-def defaulted(schedule, default: bool):
-    """`schedule` with its `ema` set to `default` where it leaves the choice to the fit (None)."""
-    return schedule if schedule.ema is not None else dataclasses.replace(schedule, ema=default)
+def resume_hint(differences: list) -> str:
+    """A sentence for a resume refused over the average ((path, old, new) run.json differences):
+    a run started before the schedule had `ema` trained without one and resumes only so."""
+    if any(path == "schedule.ema." and old == "<absent>" for path, old, _ in differences):
+        return " It was started before runs kept a weight EMA: resume it with --no-ema."
+    return ""
 
 
 def with_ema(state: dict, enabled: bool) -> dict:

@@ -149,7 +149,7 @@ def _started_with(run_dir: Path, run_info: dict, config_type: type | None = None
     if diffs:
         raise RunMismatch(f"{path}: this run was started with {_show(diffs, 0)}; the command asks "
                           f"{_show(diffs, 1)}. Use a new run directory (--run-dir) for a different setup, "
-                          f"or delete {run_dir} to start over.")
+                          f"or delete {run_dir} to start over.{weight_ema.resume_hint(diffs)}")
     return old
 
 

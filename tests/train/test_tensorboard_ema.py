@@ -148,15 +148,16 @@ def test_tensorboard_can_be_turned_off_and_a_run_from_before_the_average_says_ho
     """run.json "tensorboard": false writes no event file (a launch setting: a resume may change
     it). A run started before the average existed (its run.json schedule has no 'ema') resumes
     without one, and is refused, naming the field, when the resume asks for one."""
-    run(tmp_path, "old", stop_at=2, ema_on=None, info={"test": True, "tensorboard": False})
+    run(tmp_path, "old", stop_at=2, ema_on=False, info={"test": True, "tensorboard": False})
     assert not list((tmp_path / "old").glob("events.out.tfevents.*"))
     record = json.loads((tmp_path / "old" / "run.json").read_text())
     del record["schedule"]["ema"]
     (tmp_path / "old" / "run.json").write_text(json.dumps(record))
     assert "ema" not in checkpoint.load(checkpoints(tmp_path / "old")[-1])
-    with pytest.raises(RunMismatch, match=r"schedule\.ema=\"<absent>\"; the command asks schedule\.ema=true"):
+    with pytest.raises(RunMismatch, match=r"schedule\.ema=\"<absent>\"; the command asks schedule\.ema=true.*"
+                                          r"started before runs kept a weight EMA: resume it with --no-ema\."):
         run(tmp_path, "old", ema_on=True)
-    state, _ = run(tmp_path, "old", stop_at=4, ema_on=None)
+    state, _ = run(tmp_path, "old", stop_at=4, ema_on=False)
     assert "ema" not in state and int(state["step"]) == 4
     assert list((tmp_path / "old").glob("events.out.tfevents.*"))
 
@@ -176,3 +177,18 @@ def test_a_checkpoint_with_an_average_ships_the_average(tmp_path):
         zoo.model_variables(det, path)
     checkpoint.save(path, raw)  # weights without an average load as before
     jax.tree.map(np.testing.assert_array_equal, zoo.model_variables(det, path), raw)
+
+
+def test_the_yolo_and_camera_families_train_with_the_average_unless_told():
+    """`dsfec train` asks the family (Family.weight_ema): on for the range-Doppler YOLOs and the
+    camera models, off for DSFEC and RadarNeXt; --ema / --no-ema override it."""
+    from dsfec_jax import zoo
+    from dsfec_jax.cli import parse, training_schedule
+
+    def ema_of(model, *flags):
+        args = parse(["train", "--model", model, "--run-dir", "unused", *flags])
+        return training_schedule(args, zoo.family_of(zoo.config(model))).ema
+
+    assert [ema_of(m) for m in ("yolov8n", "yolov8n_adapter", "shuffle_yolov3", "dsfec_s", "radarnext_pan")] == [
+        True, True, True, False, False]
+    assert (ema_of("yolov8n", "--no-ema"), ema_of("dsfec_s", "--ema")) == (False, True)

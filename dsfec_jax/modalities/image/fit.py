@@ -33,7 +33,7 @@ from ..pictures import training_picture
 from .evaluate import PROTOCOLS
 from ...models.camera.targets import DEFAULT_MAX_BOXES, pad_batch
 from .predict import CameraPredictor
-from ...train.ema import defaulted, evaluated
+from ...train.ema import evaluated
 from ...train.loop import RunSpec, run_record, train
 from ...train.precise_bn import precise_bn
 from ...train.schedules import Schedule
@@ -64,7 +64,6 @@ def fit_camera(cfg, images: Sequence[CameraImage], val: Sequence[CameraImage], s
     `match_classes` is the protocol's (camera_voc keeps no match tables)."""
     det = zoo.Detector(cfg)
     family = require_modality(cfg, "image", "fit_camera")
-    schedule = defaulted(schedule, True)  # validate and ship a weight EMA, as ultralytics trains
     overrides = zoo.overrides_of(cfg) if overrides is None else overrides
     total = steps or schedule.total_steps(len(images))
     sizes = dataclasses.replace(sizes or multi_scale_for(schedule), total_steps=total)  # the final-size rule's end

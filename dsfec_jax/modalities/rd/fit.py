@@ -23,7 +23,7 @@ from ..checks import require_modality
 from ..pictures import training_picture
 from .evaluate import PROTOCOLS
 from .predict import RDPredictor
-from ...train.ema import defaulted, evaluated
+from ...train.ema import evaluated
 from ...train.loop import RunSpec, run_record, train
 from ...train.schedules import Schedule
 
@@ -40,7 +40,6 @@ def fit_rd(cfg, samples: Sequence[RDSample], val: Sequence[RDSample], schedule: 
     "match_tables", kept out of the logged metrics."""
     det = zoo.Detector(cfg)
     family = require_modality(cfg, "rd", "fit_rd")
-    schedule = defaulted(schedule, True)  # validate and ship a weight EMA, as ultralytics trains
     overrides = zoo.overrides_of(cfg) if overrides is None else overrides
     stream = RDBatchStream(samples, schedule.batch_size, seed, RDAugment() if augment else None, representation,
                            det.config.classes, max_boxes)
