@@ -156,3 +156,13 @@ def boxes2d_scene(n_images=24, seed=0, sloppiness=1.0):
         gts[f"img{i:03d}"] = Boxes2D(gt, names)
         dets[f"img{i:03d}"] = Boxes2D(np.concatenate([det, fp]).astype(np.float32), det_names, scores)
     return gts, dets
+
+
+def tensorboard_events(run_dir):
+    """The event files of a run directory read back with TensorBoard's own reader (every scalar and
+    image kept)."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    reader = EventAccumulator(str(run_dir), size_guidance={"scalars": 0, "images": 0})
+    reader.Reload()
+    return reader

@@ -17,6 +17,7 @@ from dsfec_jax.train import ema
 from dsfec_jax.train.loop import RunMismatch, RunSpec, checkpoints, train
 from dsfec_jax.train.schedules import get_schedule, learning_rate
 from dsfec_jax.train.sgd_recipe import make_recipe, ultralytics_sgd
+from builders import tensorboard_events
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,14 +69,6 @@ def run(tmp_path, name, stop_at=None, ema_on=True, info=None):
     info = {"schedule": json.loads(json.dumps(dataclasses.asdict(sched))), **(info or {"test": True})}
     state, _ = train(ToyDetector(), ToyStream(), spec, info, validate, 3, best_key="b", picture=picture)
     return state, spec
-
-
-def events(run_dir):
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    reader = EventAccumulator(str(run_dir), size_guidance={"scalars": 0, "images": 0})
-    reader.Reload()
-    return reader
 
 
 def test_the_average_is_ultralytics_model_ema():
@@ -131,7 +124,7 @@ def test_event_files_hold_the_logged_scalars_and_a_resume_keeps_the_average_exac
     # far above float32's rounding of these values (~1e-8)
     assert np.abs(resumed["ema"]["params"]["w"] - resumed["params"]["w"]).max() > 1e-7
 
-    reader = events(spec.run_dir)
+    reader = tensorboard_events(spec.run_dir)
     rows = [json.loads(line) for line in (spec.run_dir / "metrics.jsonl").read_text().splitlines()]
     losses = {r["step"]: r["loss"] for r in rows if "loss" in r}
     assert [(e.step, pytest.approx(e.value)) for e in reader.Scalars("train/loss")] == sorted(losses.items())
