@@ -137,10 +137,18 @@ def test_event_files_hold_the_logged_scalars_and_a_resume_keeps_the_average_exac
     assert [e.step for e in reader.Images("val/predictions")] == [3, 6]
 
 
-def test_tensorboard_can_be_turned_off_and_a_run_from_before_the_average_says_how_to_resume(tmp_path):
+def test_tensorboard_can_be_turned_off_and_a_run_from_before_the_average_says_how_to_resume(tmp_path, monkeypatch):
     """run.json "tensorboard": false writes no event file (a launch setting: a resume may change
-    it). A run started before the average existed (its run.json schedule has no 'ema') resumes
-    without one, and is refused, naming the field, when the resume asks for one."""
+    it), nor does any process but the first of a multi-host run. A run started before the average
+    existed (its run.json schedule has no 'ema') resumes without one, and is refused, naming the
+    field, when the resume asks for one."""
+    from dsfec_jax.train.tensorboard import Board
+
+    with monkeypatch.context() as m:
+        m.setattr(jax, "process_index", lambda: 1)
+        with Board(tmp_path / "second_host", 0, None) as board:
+            board.training(1, {"loss": 1.0})
+        assert not (tmp_path / "second_host").exists()
     run(tmp_path, "old", stop_at=2, ema_on=False, info={"test": True, "tensorboard": False})
     assert not list((tmp_path / "old").glob("events.out.tfevents.*"))
     record = json.loads((tmp_path / "old" / "run.json").read_text())
