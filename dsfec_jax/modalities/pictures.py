@@ -74,6 +74,7 @@ def training_picture(predictor, items, ident: Callable, render: Callable) -> byt
     title)` -> PNG bytes; the detections drawn are those a predict picture draws (`drawn`)."""
     item = items[0]
     key = ident(item)
-    found = predictor.predict_samples(list(items[:PICTURE_BATCH]))[key]
+    first = [items[i] for i in range(min(len(items), PICTURE_BATCH))]  # by index: a lazy split does not slice
+    found = predictor.predict_samples(first)[key]
     keep, note = drawn(found.scores, None)
     return render(item, found, keep, f"{picture_title(key)}: {note}")

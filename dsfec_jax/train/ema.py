@@ -23,7 +23,7 @@ from ..core.averaged_weights import EMA_KEY, weights_of
 from .sgd_recipe import UltralyticsSGDState
 
 DECAY = 0.9999   # ModelEMA's decay: the ramp's limit
-TAU = 2000.0     # ModelEMA's tau: updates over which the ramp rises by 1 - 1/e
+TAU = 2000.0     # ModelEMA's tau: after TAU updates the ramp is at 1 - 1/e of its height
 AVERAGED = ("params", "batch_stats")
 
 
