@@ -89,6 +89,11 @@ def parse(argv=None) -> argparse.Namespace:
     t.add_argument("--val-frames", type=positive_int, default=100)
     t.add_argument("--eval-every", type=non_negative_int, default=200, help="validate every N steps (0: at the end only)")
     t.add_argument("--no-augment", action="store_true")
+    t.add_argument("--ema", action=argparse.BooleanOptionalAction, default=None,
+                   help="validate and ship an exponential moving average of the weights, as ultralytics trains "
+                        "(default: on for the range-Doppler YOLO and camera models, off for the point-cloud ones)")
+    t.add_argument("--no-tensorboard", action="store_true",
+                   help="write no TensorBoard event files into the run directory (they sit beside metrics.jsonl)")
     t.add_argument("--window", type=non_negative_int, default=None,
                    help="point models: train on overlapping WxW-cell windows of the grid (default 96; 0 = the whole grid)")
     t.add_argument("--sizes", default=None, metavar="LOW,HIGH",
@@ -227,11 +232,12 @@ def schedule_preset(profile: str, family) -> str:
 
 
 def training_schedule(args, family):
-    """The schedule of --schedule with --batch-size and --decay-at applied."""
+    """The schedule of --schedule with --batch-size, --decay-at and --ema (default: the family's) applied."""
     from .train.schedules import get_schedule
 
     name = schedule_preset(args.schedule, family)
     changes = {"batch_size": args.batch_size} if args.batch_size else {}
+    changes["ema"] = family.weight_ema if args.ema is None else args.ema  # ultralytics' EMA for the YOLOs
     if args.decay_at:
         try:
             changes["decay_at"] = tuple(float(f) for f in args.decay_at.split(","))
@@ -262,7 +268,7 @@ def run_train(args) -> int:
     modality, cfg, overrides = resolved(args)
     sched = training_schedule(args, zoo.family_of(cfg))
     check_mesh(args, sched.batch_size)
-    info = {"command": command_line(args),
+    info = {"command": command_line(args), "tensorboard": not args.no_tensorboard,
             "data": {"source": args.data, "split": args.split}}
     final = modality.commands.train(args, cfg, overrides, sched, info)
     print(json.dumps({"run_dir": str(args.run_dir), "final": final}))

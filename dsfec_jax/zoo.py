@@ -268,19 +268,28 @@ def shipped_weights(name: str) -> Path:
 def load_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:
     """The model's collections ({'params', 'batch_stats'} for a detector, {'params'} for the depth
     network) from a weights file or a training checkpoint, shape-checked and on the device (jax
-    arrays); a checkpoint's other entries (optimizer state, step) come back as stored."""
+    arrays); a checkpoint's other entries (optimizer state, step) come back as stored. A checkpoint
+    of a run with a weight EMA gives the average's collections (core/averaged_weights.py)."""
     from .core import checkpoint
+    from .core.averaged_weights import EMA_KEY, weights_of
 
     raw = checkpoint.load(path)
-    missing = [k for k in model.collections if k not in raw]
+    missing = [k for k in model.collections if k not in weights_of(raw)]
     if missing:
-        raise ValueError(f"{path}: expected a variables tree with {missing}; found keys {sorted(raw)}")
+        raise ValueError(f"{path}: expected a variables tree with {missing}; found keys {sorted(weights_of(raw))}")
     target = model.variable_shapes()
-    loaded = checkpoint.load(path, {**{k: target[k] for k in model.collections},
-                                    **{k: v for k, v in raw.items() if k not in model.collections}})
+
+    def shaped(tree: dict) -> dict:  # the model's collections shape-checked, the rest as stored
+        return {**tree, **{k: target[k] for k in model.collections if k in tree}}
+
+    structure = shaped(raw)
+    if EMA_KEY in raw:
+        structure[EMA_KEY] = shaped(raw[EMA_KEY])
+    loaded = checkpoint.load(path, structure)
+    weights = weights_of(loaded)  # a run's weight average, where it kept one (what it validated)
     # on the device once: a jitted call converts every numpy argument again on every call (the cost:
     # docs/range-doppler.md, Deploy)
-    return {**loaded, **jax.device_put({k: loaded[k] for k in model.collections})}
+    return {**loaded, **jax.device_put({k: weights[k] for k in model.collections})}
 
 
 def model_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:

@@ -194,3 +194,13 @@ def tiny_model_pythonpath(folder: Path) -> str:
     """PYTHONPATH for child processes that know `tiny_s` (TINY_MODEL_SITE, written into FOLDER)."""
     (folder / "sitecustomize.py").write_text(TINY_MODEL_SITE)
     return os.pathsep.join([str(folder)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])
+
+
+def tensorboard_events(run_dir):
+    """The event files of a run directory read back with TensorBoard's own reader (every scalar and
+    image kept)."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    reader = EventAccumulator(str(run_dir), size_guidance={"scalars": 0, "images": 0})
+    reader.Reload()
+    return reader

@@ -6,6 +6,7 @@ import pytest
 
 from dsfec_jax import api, cli, zoo
 from dsfec_jax.metrics import nuscenes, submission
+from builders import tensorboard_events
 from conftest import tiny
 
 
@@ -28,6 +29,8 @@ def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys, uncompiled_
     assert "tiny_s: 100%" in captured.err
     assert set(final["final"]) == {"car_mAP", "car_AP4", "mAP", "class_mAP", "AP@4"}
     info = json.loads((run / "run.json").read_text())
+    # DSFEC trains without the weight EMA unless asked; TensorBoard holds the BEV predict picture
+    assert info["schedule"]["ema"] is False and [e.step for e in tensorboard_events(run).Images("val/predictions")] == [3]
     assert info["seed"] == 0 and info["config"]["name"] == "tiny_s" and info["versions"]["jax"]
     assert len(info["windows"]) == 4  # 16x16-cell windows of the 32x32 grid
     with pytest.raises(SystemExit, match=r"run.json: this run was started with seed=0, steps=3; the command asks "

@@ -22,6 +22,7 @@ from ..core.progress import quiet
 # (points 0.05, RD 0.001, camera 0.005) a picture would carry hundreds of boxes, mostly noise
 PNG_MIN_SCORE = 0.25
 FALLBACK_BEST = 3
+PICTURE_BATCH = 8  # the predictors' default batch (predict_samples), which validations run at
 
 
 def drawn(scores, given: float | None) -> tuple[np.ndarray, str]:
@@ -64,3 +65,16 @@ def planned(args, items, detections: dict, ident: Callable) -> Iterator[tuple]:
         key = ident(item)
         keep, note = drawn(detections[key].scores, args.png_min_score)
         yield item, detections[key], keep, Path(args.png_dir) / names[key], f"{picture_title(key)}: {args.model}, {note}"
+
+
+def training_picture(predictor, items, ident: Callable, render: Callable) -> bytes:
+    """PNG bytes of the predict picture of `items[0]` (a validation's first item), for TensorBoard
+    (train/tensorboard.py). The first full batch is predicted, the shape the validation has
+    compiled, so the picture costs no compile. `render(item, its detections, which to draw,
+    title)` -> PNG bytes; the detections drawn are those a predict picture draws (`drawn`)."""
+    item = items[0]
+    key = ident(item)
+    first = [items[i] for i in range(min(len(items), PICTURE_BATCH))]  # by index: a lazy split does not slice
+    found = predictor.predict_samples(first)[key]
+    keep, note = drawn(found.scores, None)
+    return render(item, found, keep, f"{picture_title(key)}: {note}")

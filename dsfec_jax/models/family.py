@@ -113,7 +113,9 @@ class Family:
     modality asks for it (modalities/checks.require_modality) and fails with a clear message otherwise.
     Data: `benchmark` (the embedded synthetic source its commands default to).
     Training: `loss(cfg)` -> fn(outputs, targets) -> (loss, parts); `schedules` maps the
-    commands' profiles (`--schedule quick|paper`) to train.schedules presets.
+    commands' profiles (`--schedule quick|paper`) to train.schedules presets; `weight_ema`: whether
+    `dsfec train` keeps, validates and ships a moving average of the weights unless told
+    (--ema/--no-ema; train/ema.py).
     Inference: `head_classes(cfg)` -> {head: classes}.
     Point families: `points` (PointParts: columns, targets, decoder, predictor defaults, export
     maps); the others have none.
@@ -134,6 +136,7 @@ class Family:
     modality: str = "points"
     schedules: Mapping[str, str] = dataclasses.field(default_factory=lambda: {"quick": "quick", "paper": "paper"})
     points: PointParts | None = None
+    weight_ema: bool = False
     recipes: Mapping[str, SearchRecipe] = dataclasses.field(default_factory=dict)
     axes: Mapping[str, Callable] = dataclasses.field(default_factory=dict)
     supernet: Supernet | None = None

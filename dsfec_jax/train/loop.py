@@ -8,6 +8,11 @@ RUN_DIR/
                            count the ground-truth boxes cut off since the previous row (dropped_boxes)
   checkpoints/step_0000300.msgpack (+ .json)   the last `keep` states
   checkpoints/best.msgpack (+ .json)           the state with the best validation score
+  events.out.tfevents.*    TensorBoard: the metrics rows, learning rates, validations and a
+                           prediction picture per validation (train/tensorboard.py)
+
+A state may keep a weight average ('ema', train/ema.py: the schedule's `ema`), which is then
+what validations score and checkpoints ship.
 
 A kill at any point leaves a resumable directory: checkpoints are written as one unit (see
 dsfec_jax.core.checkpoint; an incomplete one is skipped for the previous), a torn last metrics line is
@@ -41,17 +46,19 @@ from ..core import atomic, checkpoint, progress
 from ..core.provenance import jsonable, versions
 from ..data.batches import BatchStream
 from ..data.prefetch import Prefetcher
+from . import ema as weight_ema
 from .dropped_boxes import DroppedBoxes
 from .loss_watch import LossWatch, NonFiniteLoss
 from . import parallel
 from .schedules import Schedule, optimizer
 from .step import init_state, make_train_step
+from .tensorboard import Board, schedule_rates
 
 
 log = logging.getLogger(__name__)
 
 # run.json fields that say how a run was launched, not what it trains: a resume may differ in them
-LAUNCH_FIELDS = ("command", "versions", "resumes", "parallel")  # parallel: devices and mesh (same global batch)
+LAUNCH_FIELDS = ("command", "versions", "resumes", "parallel", "tensorboard")  # parallel: devices and mesh (same global batch)
 SHOWN_DIFFERENCES = 8  # a changed model differs in many config fields: name the first few
 # What the first step of a run (and of each training window) costs before the bar moves: XLA
 # compiling the step. Measured on the 2-core dev box (`dsfec train`, `python -m search.nas`):
@@ -144,7 +151,7 @@ def _started_with(run_dir: Path, run_info: dict, config_type: type | None = None
     if diffs:
         raise RunMismatch(f"{path}: this run was started with {_show(diffs, 0)}; the command asks "
                           f"{_show(diffs, 1)}. Use a new run directory (--run-dir) for a different setup, "
-                          f"or delete {run_dir} to start over.")
+                          f"or delete {run_dir} to start over.{weight_ema.resume_hint(diffs)}")
     return old
 
 
@@ -204,14 +211,17 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
           evaluate: Callable[[dict], dict] | None = None, eval_every: int | None = None,
           best_key: str = "car_mAP", window_detectors: list | None = None,
           init_variables: dict | None = None,
-          before_eval: Callable[[dict], dict] | None = None) -> tuple[dict, dict | None]:
+          before_eval: Callable[[dict], dict] | None = None,
+          picture: Callable[[dict], bytes] | None = None) -> tuple[dict, dict | None]:
     """Train (or resume) in spec.run_dir -> (final state, last evaluation or None).
     `evaluate(state) -> metrics` runs every `eval_every` steps and at the end; `before_eval(state)
     -> state` (e.g. train.precise_bn) runs just before it, and its state is the one evaluated,
     saved and trained on (a deterministic function of the state: resumes stay exact).
     `window_detectors[i]` (same weights, grid = the stream's window i) trains on window i.
     `init_variables` (trained variables of this or a related network) seed a fresh run module by
-    module (see warm_start); a resumed run ignores them."""
+    module (see warm_start); a resumed run ignores them. `picture(state)` -> PNG bytes of the
+    model's predictions, logged to TensorBoard with each validation (train/tensorboard.py; event
+    files unless run_info says "tensorboard": false)."""
     layout = parallel.layout()  # data parallel over the mesh (train/parallel.py); one device: as before
     layout.check_batch(stream.batch_size)
     run_info = {**run_info, "parallel": layout.record()}
@@ -222,8 +232,8 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     # a detector may bring its own optimizer (a sandwich-sampled supernet accumulates over its cycle)
     tx = (detector.optimizer if hasattr(detector, "optimizer") else optimizer)(spec.schedule, spec.total_steps)
     with progress.stage(f"initialising {detector.name} (compiling its initialisation)", enabled=spec.progress):
-        state = layout.replicate(_restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed),
-                                                                   init_variables)))
+        fresh = init_state(detector, tx, jax.random.key(spec.seed), init_variables)
+        state = layout.replicate(_restore(spec.run_dir, weight_ema.with_ema(fresh, bool(spec.schedule.ema))))
     start = int(state["step"])
     log_path = spec.run_dir / "metrics.jsonl"
     if writer:
@@ -243,7 +253,9 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     def ready_batch(step: int) -> dict:  # built, and copied into XLA buffers, in the worker
         return layout.batch_on_devices(stream.batch(step))
 
-    with open(log_path if writer else os.devnull, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches:
+    rates = None if hasattr(detector, "optimizer") else schedule_rates(spec.schedule, spec.total_steps)
+    with open(log_path if writer else os.devnull, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches, \
+            Board(spec.run_dir, start, rates, writer and run_info.get("tensorboard", True)) as board:
         bar = tqdm(batches, initial=start, total=end, disable=not spec.progress, desc=detector.name)
         compiled = set()  # the step functions (one per window) that have run: the first call compiles
         for step, batch in bar:
@@ -268,6 +280,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                 row = {"step": done, "frames_per_s": round(rate, 2), **values, **dropped.row()}
                 log.write(json.dumps(row) + "\n")
                 log.flush()
+                board.training(done, row)
             if eval_step:
                 with progress.stage(f"validating {detector.name} at step {done}"
                                     + ("" if scores else " (the first validation compiles the predictor)"),
@@ -277,6 +290,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                     scores = evaluate(layout.on_host(state))
                 log.write(json.dumps({"step": done, "eval": scores}) + "\n")
                 log.flush()
+                board.validation(done, scores, picture and (lambda: picture(layout.on_host(state))))
                 score = scores.get(best_key)  # None: nothing to score (e.g. no ground truth)
                 if score is not None and score > best and writer:
                     best = scores[best_key]

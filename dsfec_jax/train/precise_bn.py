@@ -10,7 +10,8 @@ case). Over a 50k-step schedule the two agree; re-estimating costs a few forward
 The statistics of each batch are read from one train-mode forward with zeroed running statistics
 (models/bn_statistics.py: exact, no cancellation) and averaged over the batches, as
 update_bn_stats averages them. Only 'batch_stats' changes; a train-mode step never reads it, so
-the training that follows is the same.
+the training that follows is the same. A run with a weight EMA (train/ema.py) validates the
+average, so the statistics are re-estimated for the average's parameters and replace its own.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import jax.numpy as jnp
 
 from ..layers.conv import BN_MOMENTUM
 from ..models.bn_statistics import batch_statistics
+from .ema import evaluated, with_evaluated_batch_stats
 
 
 def precise_bn(detector, batches: Callable[[], Sequence[dict]], momentum: float = BN_MOMENTUM) -> Callable[[dict], dict]:
@@ -33,8 +35,9 @@ def precise_bn(detector, batches: Callable[[], Sequence[dict]], momentum: float 
     def apply(state: dict) -> dict:
         if not made:
             made.extend(batches())
-        per_batch = [stats_of(state, b["inputs"]) for b in made]
+        weights = evaluated(state)  # a weight average's own statistics, where the run keeps one
+        per_batch = [stats_of(weights, b["inputs"]) for b in made]
         mean = jax.tree.map(lambda *s: jnp.mean(jnp.stack(s), 0), *per_batch)
-        return {**state, "batch_stats": mean}
+        return with_evaluated_batch_stats(state, mean)
 
     return apply

@@ -68,6 +68,8 @@ class Schedule:
     warmup_epochs: float = 3.0
     final_lr_fraction: float = 0.01    # ultralytics' lrf: the last epoch's lr is lr0 * lrf
     nominal_batch: int = 64            # ultralytics' nbs: gradients are summed up to this batch
+    ema: bool = False                  # validate and ship a weight EMA (train/ema.py); `dsfec train`
+                                       # sets it from Family.weight_ema unless --ema/--no-ema says
 
     def __post_init__(self):
         if self.optimizer not in OPTIMIZERS:

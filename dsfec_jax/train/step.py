@@ -1,7 +1,7 @@
 """The train step: one jitted pure function (state, batch) -> (state, metrics), state donated.
 
-state = {'params', 'batch_stats', 'opt_state', 'step'}; batch = {'inputs': pillar tensors,
-'targets': per-head target maps}.
+state = {'params', 'batch_stats', 'opt_state', 'step'}, plus 'ema' for a run that averages its
+weights (train/ema.py); batch = {'inputs': pillar tensors, 'targets': per-head target maps}.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import optax
 
 from .. import zoo
+from . import ema
 from .warm_start import warm_start
 
 
@@ -53,6 +54,7 @@ def train_step_fn(detector, tx: optax.GradientTransformation, extra_inputs: tupl
         updates, opt_state = tx.update(grads, state["opt_state"], state["params"])
         new_state = {"params": optax.apply_updates(state["params"], updates), "batch_stats": batch_stats,
                      "opt_state": opt_state, "step": state["step"] + 1}
+        new_state = ema.updated(state, new_state)  # the weight average, where the state keeps one
         metrics = {"loss": loss, "grad_norm": optax.tree.norm(grads), **parts}
         return new_state, metrics
 

@@ -7,6 +7,7 @@ from dsfec_jax.models.dsfec.targets import detector_targets
 from dsfec_jax.models.dsfec.net import HEAD_NAMES
 from dsfec_jax.models.dsfec.loss import LossConfig, detection_loss, sigmoid_focal_loss, smooth_l1
 from dsfec_jax.train.schedules import get_schedule, learning_rate, optimizer
+from dsfec_jax.train.ema import with_ema
 from dsfec_jax.train.step import batch_on_device, init_state, make_train_step
 from conftest import random_variables, tiny
 from builders import toy_frame
@@ -27,19 +28,29 @@ def test_focal_and_smooth_l1_values():
     np.testing.assert_allclose(smooth_l1(np.array([0.05, 1.0]), 0.1), [0.0125, 0.95], rtol=1e-6)
 
 
-def test_a_few_steps_lower_the_loss():
+def test_a_few_steps_lower_the_loss_and_update_the_weight_average():
+    """The step also keeps the weight EMA (train/ema.py) where the state holds one: after each
+    step ema = d ema + (1 - d) weights, params and BN statistics alike, d = 0.9999 (1 - exp(-k / 2000))."""
     det = tiny("dsfec_s")
     batch = toy_batch(det)
     sched = get_schedule("quick", warmup_steps=1, learning_rate=3e-3)
     tx = optimizer(sched, 20)
-    state = init_state(det, tx, jax.random.key(0))
+    state = with_ema(init_state(det, tx, jax.random.key(0)), True)
+    weights = lambda s: jax.tree.map(lambda x: np.array(x, np.float64), {k: s[k] for k in ("params", "batch_stats")})
+    expected = weights(state)
     step = make_train_step(det, tx)
     losses = []
-    for _ in range(20):
+    for k in range(1, 21):
         state, metrics = step(state, batch)
         losses.append(float(metrics["loss"]))
+        d = 0.9999 * (1 - np.exp(-k / 2000))
+        expected = jax.tree.map(lambda e, w: d * e + (1 - d) * w, expected, weights(state))
     assert np.isfinite(losses).all()
     assert np.mean(losses[-3:]) < 0.5 * losses[0], losses
+    assert int(state["ema"]["updates"]) == 20
+    jax.tree.map(lambda a, e: np.testing.assert_allclose(a, e, rtol=1e-5, atol=1e-7), weights(state["ema"]), expected)
+    moved = max(np.abs(a - w).max() for a, w in zip(jax.tree.leaves(weights(state["ema"])), jax.tree.leaves(weights(state))))
+    assert moved > 1e-3  # 20 steps into the ramp the average still trails the trained weights
 
 
 def test_targets_give_a_finite_loss_for_all_heads():

@@ -29,9 +29,11 @@ from ...data.camera.augment import CameraAugment
 from ...data.camera.batches import DARKNET_FINAL_SIZE, DARKNET_SIZES, CameraBatchStream, MultiScale
 from ...data.camera.images import CameraImage
 from ..checks import require_modality
+from ..pictures import training_picture
 from .evaluate import PROTOCOLS
 from ...models.camera.targets import DEFAULT_MAX_BOXES, pad_batch
 from .predict import CameraPredictor
+from ...train.ema import evaluated
 from ...train.loop import RunSpec, run_record, train
 from ...train.precise_bn import precise_bn
 from ...train.schedules import Schedule
@@ -77,15 +79,22 @@ def fit_camera(cfg, images: Sequence[CameraImage], val: Sequence[CameraImage], s
     protocol = PROTOCOLS[family.metric.name]
 
     def validate(state):
-        predictor.variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
+        predictor.variables = evaluated(state)
         return protocol.validate(predictor, val, match_classes)[0]
 
     # BN statistics re-estimated before each validation (train/precise_bn.py: the running ones lag
     # far behind in short runs)
     recalibrate = bn_recalibration(det, images, schedule.batch_size, seed, eval_size, precise_bn_images,
                                    max_boxes, stream.aspect)
+    def picture(state) -> bytes:  # TensorBoard's: the predict picture of the first validation image
+        from ...data.camera.figure import render_camera_figure
+
+        predictor.variables = evaluated(state)
+        return training_picture(predictor, val, lambda item: item.image_id, lambda item, found, keep, title:
+                                render_camera_figure(item, found.select(keep), det.config.classes, title))
+
     state, scores = train(det, stream, spec, info, validate, eval_every or total, init_variables=init_variables,
-                          best_key=family.metric.headline, before_eval=recalibrate)
+                          best_key=family.metric.headline, before_eval=recalibrate, picture=picture)
     if scores is None:  # a finished run resumed: nothing trained (re-estimating again gives the same statistics)
         state = recalibrate(state) if recalibrate else state
         scores = validate(state)

@@ -13,15 +13,18 @@ from ...data.points.augment import AugmentConfig
 from ...data.batches import BatchStream, training_windows
 from ...data.points.frame import Frame
 from ...data.points.pillarize import PillarSpec, pillar_budget
+from ..pictures import training_picture
 from .evaluate import PROTOCOLS
 from .predict import Predictor
 from ...core.provenance import jsonable, versions
+from ...train.ema import evaluated
 from ...train.loop import RunSpec, train
 from ...train.schedules import Schedule
 
 
 def state_variables(state: dict) -> dict:
-    return {"params": state["params"], "batch_stats": state["batch_stats"]}
+    """What a validation runs: the weight average's variables in a run with --ema (train/ema.py)."""
+    return evaluated(state)
 
 
 def _check_counts(counts: dict) -> None:
@@ -80,9 +83,16 @@ def fit(cfg, frames: Sequence[Frame], val: Sequence[Frame], schedule: Schedule, 
         last_tables.update(tables)
         return scores
 
+    def picture(state) -> bytes:  # TensorBoard's: the predict picture (BEV) of the first validation frame
+        from ...data.points.bev_figure import render_bev_figure
+
+        predictor = Predictor(det, state_variables(state))
+        return training_picture(predictor, val, lambda f: f.frame_id, lambda f, found, keep, title: render_bev_figure(
+            f, predictor.spec.grid, found.boxes.select(keep), found.scores[keep], predictor.class_names, title))
+
     # with origin inputs one network shaped like a window (windows[0]) trains on every window
     state, scores = train(windows[0] if origin else det, stream, spec, info, validate, eval_every or total,
                           window_detectors=None if origin else windows,
-                          init_variables=init_variables, best_key=family.metric.headline)
+                          init_variables=init_variables, best_key=family.metric.headline, picture=picture)
     scores = scores if scores is not None else validate(state)
     return det, state, {**scores, "match_tables": dict(last_tables)} if last_tables else scores

@@ -20,8 +20,10 @@ from ...data.rd.batches import DEFAULT_MAX_BOXES, RDBatchStream
 from ...data.rd.representations import RDRepresentation
 from ...data.rd.sample import RDSample
 from ..checks import require_modality
+from ..pictures import training_picture
 from .evaluate import PROTOCOLS
 from .predict import RDPredictor
+from ...train.ema import evaluated
 from ...train.loop import RunSpec, run_record, train
 from ...train.schedules import Schedule
 
@@ -51,13 +53,19 @@ def fit_rd(cfg, samples: Sequence[RDSample], val: Sequence[RDSample], schedule: 
     protocol = PROTOCOLS[family.metric.name]
 
     def validate(state):
-        variables = {"params": state["params"], "batch_stats": state["batch_stats"]}
-        scores, tables = protocol.validate(RDPredictor(det, variables, representation), val, match_classes)
+        scores, tables = protocol.validate(RDPredictor(det, evaluated(state), representation), val, match_classes)
         last_tables.clear()
         last_tables.update(tables)
         return scores
 
+    def picture(state) -> bytes:  # TensorBoard's: the predict picture of the first validation sample
+        from ...data.rd.figure import render_rd_figure
+
+        return training_picture(RDPredictor(det, evaluated(state), representation), val, lambda s: s.sample_id,
+                                lambda s, found, keep, title: render_rd_figure(
+                                    s, found.select(keep), det.config.classes, representation.colormap, title))
+
     state, scores = train(det, stream, spec, info, validate, eval_every or total, init_variables=init_variables,
-                          best_key=family.metric.headline)
+                          best_key=family.metric.headline, picture=picture)
     scores = scores if scores is not None else validate(state)
     return det, state, {**scores, "match_tables": dict(last_tables)} if last_tables else scores

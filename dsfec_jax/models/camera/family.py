@@ -45,7 +45,7 @@ MEMORY_CONVENTION = ("the paper's Sec. 3.4 formula at 416 x 416: every conv's C_
 FAMILY = Family(
     name="camera", config_class=CameraConfig, variants=VARIANTS, benchmark="street", loss=loss,
     head_classes=head_classes, metric=CAMERA_VOC_PROTOCOL, modality="image",
-    schedules={"quick": "yolo3_quick", "paper": "yolo3_paper"}, recipes={},
+    schedules={"quick": "yolo3_quick", "paper": "yolo3_paper"}, weight_ema=True, recipes={},
     stem_memory=paper_memory_mib, memory_convention=MEMORY_CONVENTION,
     weight_fields=("num_classes", "class_names"),  # `dsfec train` takes them from the data (modalities/image/cli.py)
 )

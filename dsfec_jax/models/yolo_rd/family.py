@@ -53,5 +53,5 @@ RECIPES = {
 FAMILY = Family(
     name="yolo_rd", config_class=YoloRDConfig, variants=VARIANTS, benchmark="rd-synthetic", loss=loss,
     head_classes=head_classes, metric=RD_COCO_PROTOCOL, modality="rd",
-    schedules={"quick": "yolo_quick", "paper": "yolo_paper"}, recipes=RECIPES,
+    schedules={"quick": "yolo_quick", "paper": "yolo_paper"}, weight_ema=True, recipes=RECIPES,
 )

@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+from builders import tensorboard_events
 from conftest import shared_data_dir
 from PIL import Image
 
@@ -37,6 +38,8 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys, uncompiled_init):
     assert info["schedule"]["name"] == "yolo3_quick" and info["multi_scale"] == {"sizes": [64], "every": 10}
     assert info["overrides"]["class_names"] == STREET and info["overrides"]["num_classes"] == 5  # from the data
     best = run / "checkpoints" / "best.msgpack"
+    assert info["schedule"]["ema"] is True  # the family's weight EMA: eval --weights below reads the average
+    assert [e.step for e in tensorboard_events(run).Images("val/predictions")] == [2]
 
     assert cli.main(["eval", "--model", "shuffle_yolov3", "--weights", str(best), "--data", "street", "--split",
                      "val", "--frames", "2", "--size", "64", "--json", *TINY]) == 0

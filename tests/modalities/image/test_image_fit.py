@@ -106,6 +106,12 @@ def test_precise_bn_makes_eval_mode_the_calibration_batchs_train_mode():
     state = calibrate(variables)
     again = calibrate({**variables, "batch_stats": jax.tree.map(lambda s: s * 3 + 1, variables["batch_stats"])})
     jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6), state["batch_stats"], again["batch_stats"])
+    # a run with a weight EMA validates the average: its statistics are re-estimated, the raw ones kept
+    raw = {"params": jax.tree.map(lambda p: p * 1.5, variables["params"]), "batch_stats": variables["batch_stats"]}
+    averaged = calibrate({**raw, "ema": {**again, "updates": 1}})
+    jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6), averaged["ema"]["batch_stats"],
+                 state["batch_stats"])
+    assert averaged["batch_stats"] is raw["batch_stats"]
     train_mode = det.apply(variables, batch["inputs"], train=True)[0]
     eval_mode = det.apply({"params": variables["params"], "batch_stats": state["batch_stats"]}, batch["inputs"])
     before = det.apply(variables, batch["inputs"])

@@ -10,11 +10,13 @@ import pytest
 from PIL import Image
 
 from dsfec_jax import api, cli, zoo
+from dsfec_jax.core import checkpoint
 from dsfec_jax.modalities.rd import cli as cli_rd
 from dsfec_jax.boxes.boxes2d import Boxes2D
 from dsfec_jax.data.rd.sources import load_rd_samples
 from dsfec_jax.modalities.rd.evaluate import score_rd
 from dsfec_jax.metrics.boxes2d.coco_json import load_coco_dets, load_coco_gt
+from builders import tensorboard_events
 
 RD_KEYS = {"mAP50", "mAP50_95", "mAP30", "darod_mAP50"}
 
@@ -35,6 +37,10 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys, uncompiled_init):
     assert info["data"] == {"source": "synthetic", "split": "train"} and info["command"].startswith("dsfec train")
     best = run / "checkpoints" / "best.msgpack"
     assert best.is_file()
+    # the family's weight EMA is on, and TensorBoard holds the picture predict draws and the recipe's rates
+    assert info["schedule"]["ema"] is True and "ema" in checkpoint.load(best)
+    board = tensorboard_events(run)
+    assert [e.step for e in board.Images("val/predictions")] == [1] and "train/lr/weight" in board.Tags()["scalars"]
 
     assert cli.main(["eval", "--model", "yolov8n", "--weights", str(best), "--frames", "2", "--json"]) == 0
     captured = capsys.readouterr()
