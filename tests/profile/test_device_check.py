@@ -6,12 +6,13 @@ import dataclasses
 import json
 
 import jax
+import numpy as np
 import pytest
 
 from dsfec_jax import zoo
 from dsfec_jax.layers import kernels
 from dsfec_jax.profile.device_check import __main__ as device_check
-from dsfec_jax.profile.device_check import check, sides
+from dsfec_jax.profile.device_check import check, sides, verdict
 
 # the smallest sizes the check takes: one frame a step, two compared steps, one timed call of each;
 # the networks with their fewest blocks and narrowest layers (the same layers, quick to compile)
@@ -86,3 +87,29 @@ def test_auto_taking_the_fast_kernels_on_another_backend_fails(tmp_path, monkeyp
     assert code == 1 and model["losses"]["pass"] and not model["kernels_rule"]["pass"]
     assert 'kernels="auto" took the hand-written kernels for a gpu program' in model["failures"][0]
     assert kernels.MEASURED_ON == "cpu"
+
+
+def test_observed_decisions_hold_each_choice_and_the_backend_read(monkeypatch):
+    monkeypatch.setattr(kernels.jax, "default_backend", lambda: "gpu")
+    monkeypatch.delenv("DSFEC_KERNELS", raising=False)
+    with kernels.observed_decisions() as log:
+        kernels.hand_written("auto")
+        kernels.hand_written("fast")
+    kernels.hand_written("plain")  # after the block: not collected
+    assert log == [kernels.Decision("auto", "gpu", False), kernels.Decision("fast", "gpu", True)]
+
+
+def side(platform, decisions=(), losses=(2.0, 1.5), outputs=(np.linspace(-3, 3, 7),)):
+    return sides.SideResult(platform, "test", None, list(losses), [np.asarray(o) for o in outputs], list(decisions), 0.0)
+
+
+def test_the_verdict_holds_the_tolerance_and_the_kernels_rule():
+    tol = verdict.Tolerance(rtol=1e-2, atol=0.0)
+    assert verdict.judge(side("gpu"), side("cpu"), tol)["pass"]
+    off = verdict.judge(side("gpu", outputs=(np.linspace(-3, 3, 7) * 1.02,)), side("cpu"), tol)
+    assert not off["pass"] and off["losses"]["pass"] and not off["outputs"]["pass"]
+    assert not verdict.judge(side("gpu", losses=(2.0, float("nan"))), side("cpu"), tol)["losses"]["pass"]
+    auto_fast = [kernels.Decision("auto", "cpu", True)]
+    assert verdict.kernels_rule_broken(side(kernels.MEASURED_ON, auto_fast)) == []
+    assert "for a gpu program" in verdict.kernels_rule_broken(side("gpu", auto_fast))[0]
+    assert verdict.kernels_rule_broken(side("gpu", [kernels.Decision("fast", "cpu", True)])) == []  # asked for by name
