@@ -170,7 +170,7 @@ def main(argv=None) -> int:
                 workload = build_workload(name, args, overrides.get(name, {}))
                 records.append(check_model(workload, device, reference, args.steps, tolerance,
                                            args.timed_steps, args.repeats))
-    command = "python -m dsfec_jax.profile.device_check " + " ".join(shlex.quote(a) for a in argv)
+    command = " ".join(["python -m dsfec_jax.profile.device_check", *map(shlex.quote, argv)])
     record = report.payload(command, args.seed, vars(args), device, reference, records, args.matmul_precision)
     print("\n".join(report.lines(record)))
     out = Path(args.out) if args.out else RECORDS / f"device_check_{device.platform}.json"
