@@ -10,12 +10,18 @@ The environment variable DSFEC_KERNELS=off (or =xla) turns every hand-written ke
 whatever the configs say: the numba gradient reads XLA's call frame at hand-coded offsets
 (depthwise_grad_cpu.py), so a user must be able to run without it. It is read when a layer is
 traced, so set it before the process starts (a jitted function keeps the form it was traced with).
+
+`observed_decisions()` collects every choice `hand_written` makes while it is open, with the backend
+it read: the device check (profile/device_check) reports from them which formulation each traced
+program took, and refuses "auto" having chosen the fast kernels for another backend than MEASURED_ON.
 """
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import os
-from typing import Literal
+from typing import Iterator, Literal
 
 import jax
 
@@ -24,6 +30,30 @@ KERNELS = ("auto", "fast", "plain")
 SWITCH = "DSFEC_KERNELS"
 SWITCH_OFF = ("off", "xla")  # DSFEC_KERNELS values that turn the hand-written kernels off
 MEASURED_ON = "cpu"  # the backend the hand-written kernels were chosen and measured on
+
+
+@dataclasses.dataclass(frozen=True)
+class Decision:
+    """One layer's choice while a program was traced: its `kernels`, the backend `hand_written`
+    read (jax.default_backend()) and whether it took the hand-written formulation."""
+
+    kernels: str
+    backend: str
+    fast: bool
+
+
+_observers: list[list[Decision]] = []  # the logs of the open observed_decisions() blocks
+
+
+@contextlib.contextmanager
+def observed_decisions() -> Iterator[list[Decision]]:
+    """A list that collects each hand_written decision made (at trace time) until the block ends."""
+    log: list[Decision] = []
+    _observers.append(log)
+    try:
+        yield log
+    finally:
+        _observers.remove(log)
 
 
 def check_kernels(kernels: str) -> str:
@@ -48,6 +78,8 @@ def hand_written(kernels: str) -> bool:
     """Whether a layer with this `kernels` runs the hand-written formulations: "fast" does, "plain"
     never, "auto" on the backend they were measured on; none of them with DSFEC_KERNELS=off."""
     check_kernels(kernels)
-    if switched_off():
-        return False
-    return kernels == "fast" or (kernels == "auto" and jax.default_backend() == MEASURED_ON)
+    backend = jax.default_backend()
+    fast = not switched_off() and (kernels == "fast" or (kernels == "auto" and backend == MEASURED_ON))
+    for log in _observers:
+        log.append(Decision(kernels, backend, fast))
+    return fast

@@ -32,6 +32,7 @@ class DenseHead(nn.Module):
             else:
                 x = DSConv(self.width, 1, self.act, self.depthwise_impl, self.kernels, name=f"tower{i}")(x, train)
         prior = -math.log((1 - CLS_PRIOR) / CLS_PRIOR)
-        cls = Conv(self.num_classes, 3, use_bias=True, bias_init=nn.initializers.constant(prior), name="cls")(x)
-        box = Conv(self.box_code_size, 3, use_bias=True, name="box")(x)
+        cls = Conv(self.num_classes, 3, use_bias=True, bias_init=nn.initializers.constant(prior), kernels=self.kernels,
+                   name="cls")(x)
+        box = Conv(self.box_code_size, 3, use_bias=True, kernels=self.kernels, name="box")(x)
         return {"cls": cls, "box": box}

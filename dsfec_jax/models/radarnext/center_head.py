@@ -19,9 +19,9 @@ HM_BIAS = -2.19
 BOX_OUTPUTS = (("reg", 2), ("height", 1), ("dim", 3), ("rot", 2), ("iou", 1))
 
 
-def conv_bias_bn_relu(x, features: int, train: bool, name: str):
-    x = Conv(features, 3, 1, use_bias=True, name=name)(x)  # 3x3: the same in either `kernels`
-    return nn.relu(batch_norm(train, f"{name}_bn")(x))
+def conv_bias_bn_relu(x, features: int, train: bool, name: str, kernels: str = "auto"):
+    x = Conv(features, 3, 1, use_bias=True, kernels=kernels, name=name)(x)
+    return nn.relu(batch_norm(train, f"{name}_bn", kernels)(x))
 
 
 class CenterHead(nn.Module):
@@ -32,13 +32,14 @@ class CenterHead(nn.Module):
 
     @nn.compact
     def __call__(self, x, train: bool = False) -> dict:
-        x = conv_bias_bn_relu(x, self.width, train, "shared")
+        x = conv_bias_bn_relu(x, self.width, train, "shared", self.kernels)
         x = ConvTranspose(self.width, 2, 2, use_bias=False, kernels=self.kernels, name="deblock")(x)
         x = nn.relu(batch_norm(train, "deblock_bn", self.kernels)(x))
         outputs = list(BOX_OUTPUTS) + [("hm", self.num_classes)] + ([("corner_hm", 1)] if self.corner_head else [])
         maps = {}
         for name, n in outputs:
-            h = conv_bias_bn_relu(x, self.width, train, f"{name}_conv")
+            h = conv_bias_bn_relu(x, self.width, train, f"{name}_conv", self.kernels)
             bias_init = nn.initializers.constant(HM_BIAS if name.endswith("hm") else 0.0)
-            maps[name] = Conv(n, 3, 1, use_bias=True, bias_init=bias_init, name=f"{name}_out")(h)
+            maps[name] = Conv(n, 3, 1, use_bias=True, bias_init=bias_init, kernels=self.kernels,
+                              name=f"{name}_out")(h)
         return maps
