@@ -15,7 +15,9 @@ README = Path(__file__).resolve().parents[1] / "README.md"
 SECTIONS = ("## Set-up", "## Quick start")
 # each `python -m MODULE` the README runs -> its function that parses argv without running anything
 PARSERS = {"search.blocks": ("search.blocks", "arguments"), "search.nas": ("search.nas.__main__", "parse"),
-           "dsfec_jax.profile": ("dsfec_jax.profile.__main__", "parse")}
+           "dsfec_jax.profile": ("dsfec_jax.profile.__main__", "parse"),
+           "dsfec_jax.data": ("dsfec_jax.data.__main__", "parse"),
+           "dsfec_jax.profile.device_check": ("dsfec_jax.profile.device_check.__main__", "parse")}
 NOT_OURS = {"venv", "pytest"}  # python -m venv / pytest: the standard library's and pytest's own
 
 
