@@ -269,15 +269,16 @@ def load_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:
     """The model's collections ({'params', 'batch_stats'} for a detector, {'params'} for the depth
     network) from a weights file or a training checkpoint, shape-checked and on the device (jax
     arrays); a checkpoint's other entries (optimizer state, step) come back as stored."""
-    from .core import checkpoint
+    from .core import checkpoint, run_checkpoints
 
-    raw = checkpoint.load(path)
+    orbax = not Path(path).is_file()  # a training checkpoint's step directory (or checkpoints/best)
+    raw = run_checkpoints.read_state(path) if orbax else checkpoint.load(path)
     missing = [k for k in model.collections if k not in raw]
     if missing:
         raise ValueError(f"{path}: expected a variables tree with {missing}; found keys {sorted(raw)}")
     target = model.variable_shapes()
-    loaded = checkpoint.load(path, {**{k: target[k] for k in model.collections},
-                                    **{k: v for k, v in raw.items() if k not in model.collections}})
+    loaded = checkpoint.restored(path, raw, {**{k: target[k] for k in model.collections},
+                                             **{k: v for k, v in raw.items() if k not in model.collections}})
     # on the device once: a jitted call converts every numpy argument again on every call (the cost:
     # docs/range-doppler.md, Deploy)
     return {**loaded, **jax.device_put({k: loaded[k] for k in model.collections})}
@@ -294,11 +295,12 @@ def training_record(path: str | Path) -> dict:
     """How a weights file or checkpoint was trained: its manifest's "training" (`dsfec ship`, `dsfec
     depth ship`, a finished depth run's weights), else what an auxiliary model's record reads from a
     manifest of its first format, else the run.json of the run directory a checkpoint sits in
-    (RUN/checkpoints/*.msgpack); {} when none is readable."""
+    (RUN/checkpoints/...); {} when none is readable."""
     from .core.checkpoint import manifest_path
+    from .core.run_checkpoints import run_dir_of
 
     path = Path(path)
-    for record in (manifest_path(path), path.parent.parent / "run.json"):
+    for record in (manifest_path(path), run_dir_of(path) / "run.json"):
         try:
             info = json.loads(record.read_text())
         except (OSError, ValueError):
@@ -322,7 +324,9 @@ def auxiliary_config(path: str | Path, kind: str):
     `--input` changes its input size but no weight's shape, so the name alone would run it wrong)."""
     if kind not in AUXILIARIES:
         raise KeyError(f"unknown auxiliary model {kind!r}; auxiliary models: {sorted(AUXILIARIES)}")
-    if not Path(path).is_file():
+    from .core.run_checkpoints import readable
+
+    if not readable(path):
         raise FileNotFoundError(f"{path}: no such checkpoint/weights file")
     recorded = training_record(path).get("config")
     if not isinstance(recorded, dict):
@@ -347,9 +351,11 @@ def overrides_of(cfg) -> dict:
 def trained_detector(cfg, weights: str | Path | None = None) -> tuple[Detector, dict]:
     """The detector of `cfg` and its variables from `weights` (a weights file or checkpoint; default
     the shipped weights of `cfg.name`); FileNotFoundError saying how to get weights when none are there."""
+    from .core.run_checkpoints import readable
+
     path = Path(weights) if weights else shipped_weights(cfg.name)
     detector = Detector(cfg)
-    if not path.is_file():
+    if not readable(path):
         raise FileNotFoundError(f"no weights at {path}" + ("" if weights else f": {cfg.name!r} ships no weights yet; "
                                 f"train with `dsfec train --model {cfg.name}` and pass --weights"))
     return detector, model_variables(detector, path)
@@ -358,13 +364,14 @@ def trained_detector(cfg, weights: str | Path | None = None) -> tuple[Detector, 
 def trained_fields(path: str | Path, fields) -> dict:
     """The values of config `fields` in the training record of a weights file: its manifest's
     "training" (shipped weights, `dsfec ship`), else the run.json of the run directory a checkpoint
-    sits in (RUN/checkpoints/*.msgpack); {} when neither records them."""
+    sits in (RUN/checkpoints/...); {} when neither records them."""
     from .core.checkpoint import manifest_path
+    from .core.run_checkpoints import run_dir_of
 
     path = Path(path)
     if not fields:
         return {}
-    for record, key in ((manifest_path(path), "training"), (path.parent.parent / "run.json", None)):
+    for record, key in ((manifest_path(path), "training"), (run_dir_of(path) / "run.json", None)):
         try:
             info = json.loads(record.read_text())
         except (OSError, ValueError):

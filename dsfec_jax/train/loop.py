@@ -6,12 +6,11 @@ RUN_DIR/
                            (else RunMismatch) and is appended to its "resumes" list
   metrics.jsonl            one JSON line per logged step (and per evaluation); RD and camera rows
                            count the ground-truth boxes cut off since the previous row (dropped_boxes)
-  checkpoints/step_0000300.msgpack (+ .json)   the last `keep` states
-  checkpoints/best.msgpack (+ .json)           the state with the best validation score
+  checkpoints/last/step_0000300/   the last `keep` states (Orbax; see core.run_checkpoints)
+  checkpoints/best/step_0000200/   the state with the best validation score
 
-A kill at any point leaves a resumable directory: checkpoints are written as one unit (see
-dsfec_jax.core.checkpoint; an incomplete one is skipped for the previous), a torn last metrics line is
-dropped.
+A kill at any point leaves a resumable directory: Orbax finishes a checkpoint by renaming it (an
+incomplete one is never listed, and removed), a torn last metrics line is dropped.
 
 The host never stalls the step: batches are built ahead by a background worker
 (dsfec_jax.data.prefetch) and handed over as ready XLA buffers (train.step.batch_on_device), and
@@ -33,11 +32,11 @@ from pathlib import Path
 from typing import Callable
 
 import jax
-import numpy as np
 from tqdm import tqdm
 
-from ..core import atomic, checkpoint, progress
+from ..core import atomic, progress
 from ..core.provenance import jsonable, versions
+from ..core.run_checkpoints import RunCheckpoints
 from ..data.batches import BatchStream
 from ..data.prefetch import Prefetcher
 from .dropped_boxes import DroppedBoxes
@@ -89,10 +88,6 @@ def run_record(run_info: dict | None, model: str, overrides: dict, config, sched
             "seed": seed, "steps": steps, **fields,
             "augment": jsonable(dataclasses.asdict(augment)) if augment is not None else None,
             "versions": versions()}
-
-
-def checkpoints(run_dir: Path) -> list[Path]:
-    return sorted((run_dir / "checkpoints").glob("step_*.msgpack"))
 
 
 def _differences(old, new, prefix: str = "") -> list[tuple[str, object, object]]:
@@ -157,19 +152,6 @@ def _record_start(run_dir: Path, run_info: dict, previous: dict | None, step: in
     atomic.write_json(run_dir / "run.json", {**previous, "resumes": [*previous.get("resumes", []), resume]})
 
 
-def _restore(run_dir: Path, state: dict) -> dict:
-    """The state of the newest complete checkpoint. An incomplete one (killed while saving) is
-    removed, so that it neither shadows the checkpoint that re-makes it nor counts towards `keep`."""
-    for path in reversed(checkpoints(run_dir)):
-        try:
-            return checkpoint.load(path, state)
-        except checkpoint.CheckpointError as reason:
-            log.warning("%s; removed it and resuming from the checkpoint before it", reason)
-        path.unlink()
-        checkpoint.manifest_path(path).unlink(missing_ok=True)
-    return state
-
-
 def _trim_metrics(path: Path, step: int) -> None:
     """Drop log lines past the resumed step, so a resumed run's log reads like one run. A kill
     while a line was written leaves it torn: the last line may be dropped, any other must parse."""
@@ -190,14 +172,6 @@ def _trim_metrics(path: Path, step: int) -> None:
     atomic.write_text(path, "".join(l + "\n" for l in kept))
 
 
-def _save(spec: RunSpec, state: dict, step: int, extra: dict) -> None:
-    ckpt_dir = spec.run_dir / "checkpoints"
-    checkpoint.save(ckpt_dir / f"step_{step:07d}.msgpack", jax.device_get(state), {"step": step, **extra})
-    for old in checkpoints(spec.run_dir)[: -spec.keep]:
-        old.unlink()
-        checkpoint.manifest_path(old).unlink(missing_ok=True)
-
-
 def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
           evaluate: Callable[[dict], dict] | None = None, eval_every: int | None = None,
           best_key: str = "car_mAP", window_detectors: list | None = None,
@@ -214,8 +188,9 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     previous = _started_with(spec.run_dir, run_info, type(detector.config))
     # a detector may bring its own optimizer (a sandwich-sampled supernet accumulates over its cycle)
     tx = (detector.optimizer if hasattr(detector, "optimizer") else optimizer)(spec.schedule, spec.total_steps)
+    ckpts = RunCheckpoints(spec.run_dir, spec.keep, best_key)
     with progress.stage(f"initialising {detector.name} (compiling its initialisation)", enabled=spec.progress):
-        state = _restore(spec.run_dir, init_state(detector, tx, jax.random.key(spec.seed), init_variables))
+        state = ckpts.restore(init_state(detector, tx, jax.random.key(spec.seed), init_variables))
     start = int(state["step"])
     _record_start(spec.run_dir, run_info, previous, start)
     log_path = spec.run_dir / "metrics.jsonl"
@@ -224,7 +199,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     step_fns = [d.make_train_step(tx) if hasattr(d, "make_train_step") else make_train_step(d, tx)
                 for d in (window_detectors or [detector])]
     end = spec.total_steps if spec.stop_at is None else min(spec.stop_at, spec.total_steps)
-    best = _best_score(spec.run_dir, best_key)
+    best = ckpts.best_score()
     scores = None
     losses = LossWatch()
     dropped = DroppedBoxes(detector.name)
@@ -233,7 +208,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     def ready_batch(step: int) -> dict:  # built, and copied into XLA buffers, in the worker
         return batch_on_device(stream.batch(step))
 
-    with open(log_path, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches:
+    with ckpts, open(log_path, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches:
         bar = tqdm(batches, initial=start, total=end, disable=not spec.progress, desc=detector.name)
         compiled = set()  # the step functions (one per window) that have run: the first call compiles
         for step, batch in bar:
@@ -250,7 +225,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
             save_step = done % spec.ckpt_every == 0 or done == end
             if not (log_step or eval_step or save_step):
                 continue  # nothing to read: the next step is queued without waiting for this one
-            loss = _checked_loss(losses, detector.name, spec.run_dir)  # before any state is evaluated or saved
+            loss = _checked_loss(losses, detector.name, ckpts)  # before any state is evaluated or saved
             rate = stream.batch_size * (done - start) / (time.perf_counter() - t0)
             if log_step:
                 bar.set_postfix(loss=f"{loss:.3f}", fps=f"{rate:.1f}")
@@ -270,10 +245,9 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                 score = scores.get(best_key)  # None: nothing to score (e.g. no ground truth)
                 if score is not None and score > best:
                     best = scores[best_key]
-                    checkpoint.save(spec.run_dir / "checkpoints" / "best.msgpack", jax.device_get(state),
-                                    {"step": done, best_key: best, "eval": scores})
+                    ckpts.save_best(done, state, best, {"eval": scores})
             if save_step:
-                _save(spec, state, done, {"loss": loss})
+                ckpts.save(done, state, {"loss": loss})
     return state, scores
 
 
@@ -282,24 +256,12 @@ def _compiling(name: str, window: int, windows: int) -> str:
     return f"compiling {name}'s training step{where}"
 
 
-def _checked_loss(losses: LossWatch, name: str, run_dir: Path) -> float:
+def _checked_loss(losses: LossWatch, name: str, ckpts: RunCheckpoints) -> float:
     """The latest loss; TrainingDiverged naming the first non-finite step since the last check."""
     try:
         return losses.check()
     except NonFiniteLoss as err:
-        last = checkpoints(run_dir)
+        last = ckpts.latest()
         raise TrainingDiverged(f"{name}: loss is {err.value} at step {err.step}; stopped. Last good "
-                               f"checkpoint: {last[-1] if last else 'none (diverged before the first)'}") from err
+                               f"checkpoint: {last or 'none (diverged before the first)'}") from err
 
-
-def _best_score(run_dir: Path, key: str) -> float:
-    """The recorded best score; -inf when there is none, or when the best pair is incomplete
-    (killed while saving: its manifest's score is not the weights'), so the next validation replaces it."""
-    path = run_dir / "checkpoints" / "best.msgpack"
-    if not path.exists():
-        return -np.inf
-    reason = checkpoint.problem(path)
-    if reason:
-        log.warning("%s; the next validation replaces it", reason)
-        return -np.inf
-    return checkpoint.read_manifest(path).get(key, -np.inf)

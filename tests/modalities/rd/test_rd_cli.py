@@ -10,6 +10,7 @@ import pytest
 from PIL import Image
 
 from dsfec_jax import api, cli, zoo
+from dsfec_jax.core.run_checkpoints import best_step
 from dsfec_jax.modalities.rd import cli as cli_rd
 from dsfec_jax.boxes.boxes2d import Boxes2D
 from dsfec_jax.data.rd.sources import load_rd_samples
@@ -33,8 +34,8 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys):
     assert info["model"] == "yolov8n" and info["schedule"]["name"] == "yolo_quick"  # --schedule quick, mapped
     assert info["train_samples"] == 2 and info["val_samples"] == 2 and info["steps"] == 1
     assert info["data"] == {"source": "synthetic", "split": "train"} and info["command"].startswith("dsfec train")
-    best = run / "checkpoints" / "best.msgpack"
-    assert best.is_file()
+    best = run / "checkpoints" / "best"  # its one step directory: what --weights reads
+    assert best_step(run) is not None
 
     assert cli.main(["eval", "--model", "yolov8n", "--weights", str(best), "--frames", "2", "--json"]) == 0
     captured = capsys.readouterr()
