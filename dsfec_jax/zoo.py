@@ -277,8 +277,8 @@ def load_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:
     if missing:
         raise ValueError(f"{path}: expected a variables tree with {missing}; found keys {sorted(raw)}")
     target = model.variable_shapes()
-    loaded = checkpoint.restored(path, raw, {**{k: target[k] for k in model.collections},
-                                             **{k: v for k, v in raw.items() if k not in model.collections}})
+    loaded = {**raw, **checkpoint.restored(path, {k: raw[k] for k in model.collections},
+                                           {k: target[k] for k in model.collections})}
     # on the device once: a jitted call converts every numpy argument again on every call (the cost:
     # docs/range-doppler.md, Deploy)
     return {**loaded, **jax.device_put({k: loaded[k] for k in model.collections})}

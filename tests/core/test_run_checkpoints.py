@@ -4,6 +4,7 @@ apart, the loop may donate a state as soon as its save returns, and a run direct
 checkpoints is converted on its first resume."""
 
 import os
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -108,3 +109,42 @@ def test_a_msgpack_run_directory_is_converted_on_its_first_resume(tmp_path, capl
     assert not list(old.glob("*.msgpack*"))
     assert sorted(p.name for p in (old / LEGACY_DIR).iterdir()) == [
         "best.msgpack", "best.msgpack.json", "step_0000002.msgpack", "step_0000002.msgpack.json", "step_0000004.msgpack"]
+
+
+# one of two jax.distributed processes (CPU, gloo collectives), each with one device of a 2-device
+# mesh: both make every call, Orbax writes the replicated state once
+TWO_PROCESSES = """
+import sys
+import jax
+jax.config.update("jax_cpu_collectives_implementation", "gloo")
+jax.distributed.initialize(f"127.0.0.1:{sys.argv[2]}", num_processes=2, process_id=int(sys.argv[1]))
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+from dsfec_jax.core.run_checkpoints import RunCheckpoints
+replicated = NamedSharding(Mesh(np.array(jax.devices()), ("data",)), PartitionSpec())
+def state(v):
+    w = jax.make_array_from_callback((4, 4), replicated, lambda i: np.full((4, 4), v, np.float32)[i])
+    return {"params": {"w": w}, "step": jax.make_array_from_callback((), replicated, lambda i: np.int32(v))}
+with RunCheckpoints(sys.argv[3], keep=2) as run:
+    for step in (1, 2, 3):
+        run.save(step, state(float(step)), {"loss": float(step)})
+    run.save_best(2, state(2.0), 7.0, {})
+with RunCheckpoints(sys.argv[3], keep=2) as run:
+    w = run.restore(state(0.0))["params"]["w"]
+    print("restored", float(np.asarray(w.addressable_data(0))[0, 0]), len(w.sharding.device_set), run.best_score())
+"""
+
+
+def test_two_processes_write_one_checkpoint_and_resume_it(tmp_path):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
+    workers = [subprocess.Popen([sys.executable, "-c", TWO_PROCESSES, str(i), str(port), str(tmp_path)], env=env,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
+    outputs = [w.communicate(timeout=120) for w in workers]
+    assert [w.returncode for w in workers] == [0, 0], [err[-2000:] for _, err in outputs]
+    assert [out.splitlines()[-1].split() for out, _ in outputs] == [["restored", "3.0", "2", "7.0"]] * 2
+    assert [p.name for p in last_steps(tmp_path)] == ["step_0000002", "step_0000003"]
+    assert best_step(tmp_path).name == "step_0000002"
+    np.testing.assert_array_equal(read_state(last_steps(tmp_path)[-1])["params"]["w"], np.full((4, 4), 3.0))
