@@ -43,7 +43,7 @@ LEGACY_DIR = "msgpack_before_orbax"
 
 
 def checkpoints_dir(run_dir: str | os.PathLike) -> Path:
-    return Path(run_dir) / "checkpoints"
+    return Path(run_dir).absolute() / "checkpoints"  # Orbax refuses relative paths (--run-dir runs/x)
 
 
 def _options(**kwargs) -> ocp.CheckpointManagerOptions:
@@ -54,7 +54,7 @@ class RunCheckpoints:
     """The last-N and best managers of one run directory; what the training loop calls."""
 
     def __init__(self, run_dir: str | os.PathLike, keep: int = 3, best_key: str = "car_mAP"):
-        self.run_dir, self.best_key = Path(run_dir), best_key
+        self.run_dir, self.best_key = Path(run_dir).absolute(), best_key
         base = checkpoints_dir(run_dir)
         # cleanup_tmp_directories: a kill mid-save left a temporary step; remove it so it is neither
         # mistaken for a checkpoint nor left to fill the disk
@@ -147,7 +147,7 @@ def is_checkpoint(path: str | os.PathLike) -> bool:
 def resolve(path: str | os.PathLike) -> Path:
     """PATH as a step directory: a step itself, or a manager's directory (checkpoints/best,
     checkpoints/last) for its newest step; PATH unchanged otherwise."""
-    path = Path(path)
+    path = Path(path).absolute()
     if path.is_dir() and not is_checkpoint(path):
         found = _finished_steps(path)
         if found:

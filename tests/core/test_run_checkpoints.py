@@ -62,8 +62,9 @@ def test_a_kill_during_an_async_save_resumes_from_the_step_before(tmp_path):
     assert sorted(p.name for p in (tmp_path / "checkpoints" / "last").iterdir()) == ["step_0000001", "step_0000003"]
 
 
-def test_keep_n_holds_and_the_best_is_kept_apart(tmp_path):
-    with RunCheckpoints(tmp_path, keep=2, best_key="mAP") as run:
+def test_keep_n_holds_and_the_best_is_kept_apart(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path.parent)  # a run directory given relative (--run-dir runs/x)
+    with RunCheckpoints(tmp_path.name, keep=2, best_key="mAP") as run:
         for step in range(1, 6):
             run.save(step, state(float(step)), {"loss": float(step)})
             if step in (1, 3):
@@ -73,7 +74,7 @@ def test_keep_n_holds_and_the_best_is_kept_apart(tmp_path):
     assert [p.name for p in last_steps(tmp_path)] == ["step_0000004", "step_0000005"]
     best = best_step(tmp_path)
     assert best.name == "step_0000003" and read_extra(best) == {"step": 3, "mAP": 30.0, "eval": {"mAP": 30.0}}
-    assert read_state(tmp_path / "checkpoints" / "best")["params"]["w"][0, 0] == 3.0  # the manager dir reads its step
+    assert read_state(f"{tmp_path.name}/checkpoints/best")["params"]["w"][0, 0] == 3.0  # the manager dir reads its step
 
 
 def test_the_saved_state_is_the_one_at_save_time_though_the_next_step_donates_it(tmp_path):
