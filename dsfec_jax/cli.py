@@ -6,10 +6,10 @@ thin commands over the library, the same flags for every family.
     dsfec eval    --model dsfec_s [--weights PATH] --data synthetic --split test --seed 0 --frames 200 --json
     dsfec predict --model dsfec_s [--weights PATH] --data tj4d:PATH --split all --out pred.json [--png-dir DIR]
     dsfec train   --model yolov8n [--data synthetic] [--schedule quick] --run-dir runs/v8n
-    dsfec predict --model yolov8n --weights runs/v8n/checkpoints/best.msgpack --out dets.json --gt-out gt.json --png-dir png
+    dsfec predict --model yolov8n --weights runs/v8n/checkpoints/best --out dets.json --gt-out gt.json --png-dir png
     dsfec train   --model shuffle_yolov3 --data street --schedule quick --run-dir runs/sy3 [--steps N]
-    dsfec eval    --model shuffle_yolov3 --weights runs/sy3/checkpoints/best.msgpack --data voc:DIR --split all
-    dsfec export  --model shuffle_yolov3 --weights runs/sy3/checkpoints/best.msgpack --out exports/sy3 [--size 416]
+    dsfec eval    --model shuffle_yolov3 --weights runs/sy3/checkpoints/best --data voc:DIR --split all
+    dsfec export  --model shuffle_yolov3 --weights runs/sy3/checkpoints/best --out exports/sy3 [--size 416]
     dsfec predict --model shuffle_yolov3 --input photos/ "more/*.jpg" --out dets.json --png-dir png   # your own files
 
 Each command resolves the model's config once (--model, --set and the fields the modality's flags
@@ -111,7 +111,7 @@ def parse(argv=None) -> argparse.Namespace:
     sh.add_argument("--out-dir", default=None, help="default: the package's weights directory")
     ex = sub.add_parser("export", help="ONNX + jax.export of the network with box decoding (NMS stays on the host)")
     ex.add_argument("--model", required=True)
-    ex.add_argument("--weights", default=None, help="weights/checkpoint file (default: shipped weights)")
+    ex.add_argument("--weights", default=None, help="weights file or training checkpoint (RUN/checkpoints/best, RUN/checkpoints/last/step_N; default: shipped weights)")
     ex.add_argument("--out", required=True, help="directory for model.onnx, model.jax_export, deploy.json")
     ex.add_argument("--top-k", type=positive_int, default=None,
                     help="point models: boxes per head kept by the in-graph decode (default 100)")
@@ -162,7 +162,7 @@ def parse(argv=None) -> argparse.Namespace:
     for name, split in (("eval", "test"), ("predict", "test")):
         q = sub.add_parser(name, help=f"{name} a zoo model")
         common(q, split)
-        q.add_argument("--weights", default=None, help="weights/checkpoint file (default: shipped weights)")
+        q.add_argument("--weights", default=None, help="weights file or training checkpoint (RUN/checkpoints/best, RUN/checkpoints/last/step_N; default: shipped weights)")
         q.add_argument("--score-threshold", type=float, default=None,
                        help=f"keep detections scoring at least this (default: points {POINT_SCORE_THRESHOLD}; "
                             "range-Doppler 0.001, the paper's evaluation setting)")
@@ -287,7 +287,7 @@ def run_eval_or_predict(args) -> int:
 
 def ship_source(args) -> tuple[Path, dict]:
     """The checkpoint --checkpoint picks in --run-dir, and the run's run.json."""
-    from .train.loop import checkpoints
+    from .core.run_checkpoints import best_step, last_steps, legacy_checkpoints, legacy_message
 
     run = Path(args.run_dir)
     if not (run / "run.json").is_file():
@@ -295,13 +295,15 @@ def ship_source(args) -> tuple[Path, dict]:
     info = json.loads((run / "run.json").read_text())
     if info.get("model", args.model) != args.model:
         sys.exit(f"dsfec ship: {run} trained {info['model']!r}, not --model {args.model!r}")
-    last = checkpoints(run)
+    last, best = last_steps(run), best_step(run)
+    if not last and legacy_checkpoints(run):
+        sys.exit(f"dsfec ship: {legacy_message(run)}")
     if args.checkpoint == "last" and not last:
-        sys.exit(f"dsfec ship: {run / 'checkpoints'} holds no step_*.msgpack checkpoint")
-    source = run / "checkpoints" / "best.msgpack" if args.checkpoint == "best" else last[-1]
-    if not source.is_file():
-        sys.exit(f"dsfec ship: {source} missing (no validation has run yet); try --checkpoint last")
-    return source, info
+        sys.exit(f"dsfec ship: {run / 'checkpoints' / 'last'} holds no complete checkpoint")
+    if args.checkpoint == "best" and best is None:
+        sys.exit(f"dsfec ship: {run / 'checkpoints' / 'best'} holds no checkpoint (no validation has run yet); "
+                 "try --checkpoint last")
+    return (best if args.checkpoint == "best" else last[-1]), info
 
 
 def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
@@ -323,6 +325,7 @@ def run_ship(args) -> int:
     from . import zoo
     from .core import checkpoint
     from .core.provenance import versions
+    from .core.run_checkpoints import read_extra
     from .modalities.registry import modality_of
 
     modality = modality_of(model_config(args.model))
@@ -335,7 +338,7 @@ def run_ship(args) -> int:
     family = zoo.family_of(cfg)
     measured = {split: measure_benchmark(predictor, family, split, args.frames) for split in ("val", "test")}
     manifest = {"model": args.model, "source_checkpoint": str(source),
-                "step": checkpoint.read_manifest(source).get("step"), "training": info,
+                "step": read_extra(source).get("step"), "training": info,
                 "measured": measured, "ship_command": command_line(args),
                 "versions": versions()}
     out = Path(args.out_dir) / f"{args.model}.msgpack" if args.out_dir else zoo.shipped_weights(args.model)

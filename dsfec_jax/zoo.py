@@ -270,22 +270,23 @@ def load_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:
     network) from a weights file or a training checkpoint, shape-checked and on the device (jax
     arrays); a checkpoint's other entries (optimizer state, step) come back as stored. A checkpoint
     of a run with a weight EMA gives the average's collections (core/averaged_weights.py)."""
-    from .core import checkpoint
+    from .core import checkpoint, run_checkpoints
     from .core.averaged_weights import EMA_KEY, weights_of
 
-    raw = checkpoint.load(path)
+    orbax = not Path(path).is_file()  # a training checkpoint's step directory (or checkpoints/best)
+    raw = run_checkpoints.read_state(path) if orbax else checkpoint.load(path)
     missing = [k for k in model.collections if k not in weights_of(raw)]
     if missing:
         raise ValueError(f"{path}: expected a variables tree with {missing}; found keys {sorted(weights_of(raw))}")
     target = model.variable_shapes()
 
     def shaped(tree: dict) -> dict:  # the model's collections shape-checked, the rest as stored
-        return {**tree, **{k: target[k] for k in model.collections if k in tree}}
+        kept = [k for k in model.collections if k in tree]
+        return {**tree, **checkpoint.restored(path, {k: tree[k] for k in kept}, {k: target[k] for k in kept})}
 
-    structure = shaped(raw)
+    loaded = shaped(raw)
     if EMA_KEY in raw:
-        structure[EMA_KEY] = shaped(raw[EMA_KEY])
-    loaded = checkpoint.load(path, structure)
+        loaded[EMA_KEY] = shaped(raw[EMA_KEY])
     weights = weights_of(loaded)  # a run's weight average, where it kept one (what it validated)
     # on the device once: a jitted call converts every numpy argument again on every call (the cost:
     # docs/range-doppler.md, Deploy)
@@ -303,11 +304,12 @@ def training_record(path: str | Path) -> dict:
     """How a weights file or checkpoint was trained: its manifest's "training" (`dsfec ship`, `dsfec
     depth ship`, a finished depth run's weights), else what an auxiliary model's record reads from a
     manifest of its first format, else the run.json of the run directory a checkpoint sits in
-    (RUN/checkpoints/*.msgpack); {} when none is readable."""
+    (RUN/checkpoints/...); {} when none is readable."""
     from .core.checkpoint import manifest_path
+    from .core.run_checkpoints import run_dir_of
 
     path = Path(path)
-    for record in (manifest_path(path), path.parent.parent / "run.json"):
+    for record in (manifest_path(path), run_dir_of(path) / "run.json"):
         try:
             info = json.loads(record.read_text())
         except (OSError, ValueError):
@@ -331,7 +333,9 @@ def auxiliary_config(path: str | Path, kind: str):
     `--input` changes its input size but no weight's shape, so the name alone would run it wrong)."""
     if kind not in AUXILIARIES:
         raise KeyError(f"unknown auxiliary model {kind!r}; auxiliary models: {sorted(AUXILIARIES)}")
-    if not Path(path).is_file():
+    from .core.run_checkpoints import readable
+
+    if not readable(path):
         raise FileNotFoundError(f"{path}: no such checkpoint/weights file")
     recorded = training_record(path).get("config")
     if not isinstance(recorded, dict):
@@ -356,9 +360,11 @@ def overrides_of(cfg) -> dict:
 def trained_detector(cfg, weights: str | Path | None = None) -> tuple[Detector, dict]:
     """The detector of `cfg` and its variables from `weights` (a weights file or checkpoint; default
     the shipped weights of `cfg.name`); FileNotFoundError saying how to get weights when none are there."""
+    from .core.run_checkpoints import readable
+
     path = Path(weights) if weights else shipped_weights(cfg.name)
     detector = Detector(cfg)
-    if not path.is_file():
+    if not readable(path):
         raise FileNotFoundError(f"no weights at {path}" + ("" if weights else f": {cfg.name!r} ships no weights yet; "
                                 f"train with `dsfec train --model {cfg.name}` and pass --weights"))
     return detector, model_variables(detector, path)
@@ -367,13 +373,14 @@ def trained_detector(cfg, weights: str | Path | None = None) -> tuple[Detector, 
 def trained_fields(path: str | Path, fields) -> dict:
     """The values of config `fields` in the training record of a weights file: its manifest's
     "training" (shipped weights, `dsfec ship`), else the run.json of the run directory a checkpoint
-    sits in (RUN/checkpoints/*.msgpack); {} when neither records them."""
+    sits in (RUN/checkpoints/...); {} when neither records them."""
     from .core.checkpoint import manifest_path
+    from .core.run_checkpoints import run_dir_of
 
     path = Path(path)
     if not fields:
         return {}
-    for record, key in ((manifest_path(path), "training"), (path.parent.parent / "run.json", None)):
+    for record, key in ((manifest_path(path), "training"), (run_dir_of(path) / "run.json", None)):
         try:
             info = json.loads(record.read_text())
         except (OSError, ValueError):

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from dsfec_jax import api, cli, zoo
+from dsfec_jax.core import checkpoint
 from dsfec_jax.metrics import nuscenes, submission
 from builders import tensorboard_events
 from conftest import tiny
@@ -38,7 +39,7 @@ def test_train_eval_predict_round_trip(tiny_model, tmp_path, capsys, uncompiled_
         cli.main(["train", "--model", tiny_model, "--steps", "4", "--batch-size", "2", "--frames", "4", "--seed", "1",
                   "--val-frames", "2", "--eval-every", "3", "--run-dir", str(run), "--max-pillars", "96", "--window", "16"])
     assert json.loads((run / "run.json").read_text()) == info
-    ckpt = sorted((run / "checkpoints").glob("step_*.msgpack"))[-1]
+    ckpt = run / "checkpoints" / "last" / "step_0000003"  # a training checkpoint is weights too
 
     assert cli.main(["eval", "--model", tiny_model, "--weights", str(ckpt), "--frames", "3", "--json",
                      "--max-pillars", "96"]) == 0
@@ -78,14 +79,15 @@ def test_ship_measures_a_radarnext_run_with_the_vod_protocol(monkeypatch, tmp_pa
     """A RadarNeXt run ships with the VoD 3D AP on the synthetic 4D benchmark (not the nuScenes
     metric) and with the pillar slots the run trained with."""
     from conftest import random_variables
-    from dsfec_jax.core import checkpoint
     from dsfec_jax.core.grid import Grid
+    from dsfec_jax.core.run_checkpoints import RunCheckpoints
 
     grid = Grid((0.0, 10.24), (-5.12, 5.12), (-3.0, 2.0), 0.16)
     det = zoo.create("radarnext_fpn", grid=grid, layer_nums=(1, 1, 1), max_points=4, max_pillars=96)
     monkeypatch.setitem(zoo.REGISTRY, "tiny_radarnext", det.config)
     run = tmp_path / "run"
-    checkpoint.save(run / "checkpoints" / "step_0000001.msgpack", random_variables(det, 0), {"step": 1})
+    with RunCheckpoints(run) as checkpoints:
+        checkpoints.save(1, random_variables(det, 0), {})
     (run / "run.json").write_text(json.dumps({"seed": 0, "overrides": {"max_pillars": 96}}))
     assert cli.main(["ship", "--model", "tiny_radarnext", "--run-dir", str(run), "--checkpoint", "last",
                      "--frames", "2", "--out-dir", str(tmp_path / "weights")]) == 0
@@ -178,7 +180,10 @@ def test_ship_without_a_checkpoint_says_what_is_missing(tiny_model, tmp_path):
         cli.main(["ship", "--model", tiny_model, "--run-dir", str(run)])
     run.mkdir()
     (run / "run.json").write_text("{}")
-    with pytest.raises(SystemExit, match="holds no step_"):
+    with pytest.raises(SystemExit, match="checkpoints/last holds no complete checkpoint"):
         cli.main(["ship", "--model", tiny_model, "--run-dir", str(run), "--checkpoint", "last"])
-    with pytest.raises(SystemExit, match="best.msgpack missing"):
+    with pytest.raises(SystemExit, match=r"checkpoints/best holds no checkpoint \(no validation has run yet\)"):
+        cli.main(["ship", "--model", tiny_model, "--run-dir", str(run)])
+    checkpoint.save(run / "checkpoints" / "step_0000001.msgpack", {"params": {}}, {"step": 1})  # a run from before Orbax
+    with pytest.raises(SystemExit, match=r"run/checkpoints holds msgpack checkpoints written before Orbax .*resume the run once"):
         cli.main(["ship", "--model", tiny_model, "--run-dir", str(run)])

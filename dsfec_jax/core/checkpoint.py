@@ -79,13 +79,16 @@ def load(path: str | os.PathLike, target=None):
         raw = flax.serialization.msgpack_restore(data)
     except Exception as err:  # msgpack raises several types on corrupt input
         raise ValueError(f"{path}: not a readable msgpack variables file ({err})") from err
-    if target is None:
-        return raw
-    restored = flax.serialization.from_state_dict(target, raw)
-    for (kp, a), b in zip(jax.tree_util.tree_flatten_with_path(target)[0], jax.tree.leaves(restored)):
+    return raw if target is None else restored(path, raw, target)
+
+
+def restored(path: str | os.PathLike, raw: dict, target):
+    """`raw` (a state dict read from PATH) in the structure of `target`, every shape checked."""
+    tree = flax.serialization.from_state_dict(target, raw)
+    for (kp, a), b in zip(jax.tree_util.tree_flatten_with_path(target)[0], jax.tree.leaves(tree)):
         if np.shape(a) != np.shape(b):
             raise ValueError(f"{path}: {jax.tree_util.keystr(kp)} has shape {np.shape(b)}, the model expects {np.shape(a)}")
-    return restored
+    return tree
 
 
 def manifest_path(path: str | os.PathLike) -> Path:

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from .. import zoo
+from ..core.run_checkpoints import readable
 
 # the phase a predictor's construction runs in (the watchdog's words for it on a slow start)
 LOADING = "loading {}: its weights onto the device, BatchNorm folded into the convs"
@@ -39,7 +40,7 @@ def refuse_camera_flags(args, command: str, modality: str) -> None:
 def export_weights(args) -> Path:
     """The weights `dsfec export` reads: --weights, else the model's shipped weights; exit when absent."""
     path = Path(args.weights) if args.weights else zoo.shipped_weights(args.model)
-    if not path.is_file():
+    if not readable(path):
         sys.exit(f"no weights at {path}: pass --weights (a trained checkpoint or weights file)")
     return path
 

@@ -6,17 +6,16 @@ RUN_DIR/
                            (else RunMismatch) and is appended to its "resumes" list
   metrics.jsonl            one JSON line per logged step (and per evaluation); RD and camera rows
                            count the ground-truth boxes cut off since the previous row (dropped_boxes)
-  checkpoints/step_0000300.msgpack (+ .json)   the last `keep` states
-  checkpoints/best.msgpack (+ .json)           the state with the best validation score
+  checkpoints/last/step_0000300/   the last `keep` states (Orbax; see core.run_checkpoints)
+  checkpoints/best/step_0000200/   the state with the best validation score
   events.out.tfevents.*    TensorBoard: the metrics rows, learning rates, validations and a
                            prediction picture per validation (train/tensorboard.py)
 
 A state may keep a weight average ('ema', train/ema.py: the schedule's `ema`), which is then
 what validations score and checkpoints ship.
 
-A kill at any point leaves a resumable directory: checkpoints are written as one unit (see
-dsfec_jax.core.checkpoint; an incomplete one is skipped for the previous), a torn last metrics line is
-dropped.
+A kill at any point leaves a resumable directory: Orbax finishes a checkpoint by renaming it (an
+incomplete one is never listed, and removed), a torn last metrics line is dropped.
 
 The host never stalls the step: batches are built ahead by a background worker
 (dsfec_jax.data.prefetch) and handed over as ready XLA buffers (train.step.batch_on_device), and
@@ -39,11 +38,11 @@ from pathlib import Path
 from typing import Callable
 
 import jax
-import numpy as np
 from tqdm import tqdm
 
-from ..core import atomic, checkpoint, progress
+from ..core import atomic, progress
 from ..core.provenance import jsonable, versions
+from ..core.run_checkpoints import RunCheckpoints
 from ..data.batches import BatchStream
 from ..data.prefetch import Prefetcher
 from . import ema as weight_ema
@@ -98,10 +97,6 @@ def run_record(run_info: dict | None, model: str, overrides: dict, config, sched
             "seed": seed, "steps": steps, **fields,
             "augment": jsonable(dataclasses.asdict(augment)) if augment is not None else None,
             "versions": versions()}
-
-
-def checkpoints(run_dir: Path) -> list[Path]:
-    return sorted((run_dir / "checkpoints").glob("step_*.msgpack"))
 
 
 def _differences(old, new, prefix: str = "") -> list[tuple[str, object, object]]:
@@ -166,19 +161,6 @@ def _record_start(run_dir: Path, run_info: dict, previous: dict | None, step: in
     atomic.write_json(run_dir / "run.json", {**previous, "resumes": [*previous.get("resumes", []), resume]})
 
 
-def _restore(run_dir: Path, state: dict) -> dict:
-    """The state of the newest complete checkpoint. An incomplete one (killed while saving) is
-    removed, so that it neither shadows the checkpoint that re-makes it nor counts towards `keep`."""
-    for path in reversed(checkpoints(run_dir)):
-        try:
-            return checkpoint.load(path, state)
-        except checkpoint.CheckpointError as reason:
-            log.warning("%s; removed it and resuming from the checkpoint before it", reason)
-        path.unlink()
-        checkpoint.manifest_path(path).unlink(missing_ok=True)
-    return state
-
-
 def _trim_metrics(path: Path, step: int) -> None:
     """Drop log lines past the resumed step, so a resumed run's log reads like one run. A kill
     while a line was written leaves it torn: the last line may be dropped, any other must parse."""
@@ -197,14 +179,6 @@ def _trim_metrics(path: Path, step: int) -> None:
         if row.get("step", 0) <= step:
             kept.append(line)
     atomic.write_text(path, "".join(l + "\n" for l in kept))
-
-
-def _save(spec: RunSpec, state: dict, step: int, extra: dict) -> None:
-    ckpt_dir = spec.run_dir / "checkpoints"
-    checkpoint.save(ckpt_dir / f"step_{step:07d}.msgpack", jax.device_get(state), {"step": step, **extra})
-    for old in checkpoints(spec.run_dir)[: -spec.keep]:
-        old.unlink()
-        checkpoint.manifest_path(old).unlink(missing_ok=True)
 
 
 def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
@@ -231,9 +205,12 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     previous = _started_with(spec.run_dir, run_info, type(detector.config))
     # a detector may bring its own optimizer (a sandwich-sampled supernet accumulates over its cycle)
     tx = (detector.optimizer if hasattr(detector, "optimizer") else optimizer)(spec.schedule, spec.total_steps)
+    ckpts = RunCheckpoints(spec.run_dir, spec.keep, best_key)
     with progress.stage(f"initialising {detector.name} (compiling its initialisation)", enabled=spec.progress):
-        fresh = init_state(detector, tx, jax.random.key(spec.seed), init_variables)
-        state = layout.replicate(_restore(spec.run_dir, weight_ema.with_ema(fresh, bool(spec.schedule.ema))))
+        fresh = weight_ema.with_ema(init_state(detector, tx, jax.random.key(spec.seed), init_variables),
+                                    bool(spec.schedule.ema))
+        # restored in the fresh state's placement (the mesh's), then process 0's values everywhere
+        state = layout.replicate(ckpts.restore(layout.replicate(fresh)))
     start = int(state["step"])
     log_path = spec.run_dir / "metrics.jsonl"
     if writer:
@@ -244,7 +221,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                 for d in (window_detectors or [detector])]
     step_fns = [layout.step(f) for f in step_fns]
     end = spec.total_steps if spec.stop_at is None else min(spec.stop_at, spec.total_steps)
-    best = _best_score(spec.run_dir, best_key)
+    best = ckpts.best_score()
     scores = None
     losses = LossWatch()
     dropped = DroppedBoxes(detector.name)
@@ -254,7 +231,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
         return layout.batch_on_devices(stream.batch(step))
 
     rates = None if hasattr(detector, "optimizer") else schedule_rates(spec.schedule, spec.total_steps)
-    with open(log_path if writer else os.devnull, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches, \
+    with ckpts, open(log_path if writer else os.devnull, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches, \
             Board(spec.run_dir, start, rates, writer and run_info.get("tensorboard", True)) as board:
         bar = tqdm(batches, initial=start, total=end, disable=not spec.progress, desc=detector.name)
         compiled = set()  # the step functions (one per window) that have run: the first call compiles
@@ -272,7 +249,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
             save_step = done % spec.ckpt_every == 0 or done == end
             if not (log_step or eval_step or save_step):
                 continue  # nothing to read: the next step is queued without waiting for this one
-            loss = _checked_loss(losses, detector.name, spec.run_dir)  # before any state is evaluated or saved
+            loss = _checked_loss(losses, detector.name, ckpts)  # before any state is evaluated or saved
             rate = stream.batch_size * (done - start) / (time.perf_counter() - t0)
             if log_step:
                 bar.set_postfix(loss=f"{loss:.3f}", fps=f"{rate:.1f}")
@@ -292,12 +269,11 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
                 log.flush()
                 board.validation(done, scores, picture and (lambda: picture(layout.on_host(state))))
                 score = scores.get(best_key)  # None: nothing to score (e.g. no ground truth)
-                if score is not None and score > best and writer:
+                if score is not None and score > best:  # every process: Orbax saves collectively
                     best = scores[best_key]
-                    checkpoint.save(spec.run_dir / "checkpoints" / "best.msgpack", jax.device_get(state),
-                                    {"step": done, best_key: best, "eval": scores})
-            if save_step and writer:
-                _save(spec, state, done, {"loss": loss})
+                    ckpts.save_best(done, state, best, {"eval": scores})
+            if save_step:
+                ckpts.save(done, state, {"loss": loss})
     return state, scores
 
 
@@ -306,24 +282,12 @@ def _compiling(name: str, window: int, windows: int) -> str:
     return f"compiling {name}'s training step{where}"
 
 
-def _checked_loss(losses: LossWatch, name: str, run_dir: Path) -> float:
+def _checked_loss(losses: LossWatch, name: str, ckpts: RunCheckpoints) -> float:
     """The latest loss; TrainingDiverged naming the first non-finite step since the last check."""
     try:
         return losses.check()
     except NonFiniteLoss as err:
-        last = checkpoints(run_dir)
+        last = ckpts.latest()
         raise TrainingDiverged(f"{name}: loss is {err.value} at step {err.step}; stopped. Last good "
-                               f"checkpoint: {last[-1] if last else 'none (diverged before the first)'}") from err
+                               f"checkpoint: {last or 'none (diverged before the first)'}") from err
 
-
-def _best_score(run_dir: Path, key: str) -> float:
-    """The recorded best score; -inf when there is none, or when the best pair is incomplete
-    (killed while saving: its manifest's score is not the weights'), so the next validation replaces it."""
-    path = run_dir / "checkpoints" / "best.msgpack"
-    if not path.exists():
-        return -np.inf
-    reason = checkpoint.problem(path)
-    if reason:
-        log.warning("%s; the next validation replaces it", reason)
-        return -np.inf
-    return checkpoint.read_manifest(path).get(key, -np.inf)

@@ -40,12 +40,12 @@ import time
 from pathlib import Path
 
 from dsfec_jax import zoo
-from dsfec_jax.core import atomic, checkpoint
+from dsfec_jax.core import atomic
 from dsfec_jax.core.environment import environment
 from dsfec_jax.data.rd.sources import load_rd_samples
 from dsfec_jax.modalities.rd.evaluate import evaluate_rd
 from dsfec_jax.modalities.rd.predict import RDPredictor
-from dsfec_jax.train.loop import checkpoints
+from dsfec_jax.core.run_checkpoints import last_steps, read_state
 
 from ..journal import Journal
 from ..ranking import kendall_tau, tau_p_value
@@ -69,10 +69,10 @@ def standalone_predictors(run_dir: Path, keys: list[str]) -> dict[str, RDPredict
             raise ValueError(f"{run_dir / SUBDIR}: no finished stand-alone trial for subnet {key}")
         r = records[key]
         trial_dir = run_dir / SUBDIR / "trials" / r["key"]
-        found = checkpoints(trial_dir)
+        found = last_steps(trial_dir)
         if not found:
             raise ValueError(f"{trial_dir}: no checkpoint to score")
-        state = checkpoint.load(found[-1])
+        state = read_state(found[-1])
         det = zoo.create(r["base"], **r["overrides"], **get_recipe(r["recipe"], r["base"]).model_overrides())
         out[key] = RDPredictor(det, {"params": state["params"], "batch_stats": state["batch_stats"]})
     return out

@@ -31,7 +31,7 @@ import numpy as np
 from tqdm import tqdm
 
 from dsfec_jax import zoo
-from dsfec_jax.core import checkpoint
+from dsfec_jax.core.run_checkpoints import last_steps, read_extra, read_state
 from dsfec_jax.core.progress import stage
 from dsfec_jax.core.provenance import jsonable, versions
 from dsfec_jax.data.rd.augment import RDAugment
@@ -42,7 +42,7 @@ from dsfec_jax.layers.yolo import BN_MOMENTUM
 from dsfec_jax.modalities.rd.predict import RDPredictor
 from dsfec_jax.profile import counting
 from dsfec_jax.modalities.rd.profile import folded_params
-from dsfec_jax.train.loop import RunMismatch, RunSpec, checkpoints, train
+from dsfec_jax.train.loop import RunMismatch, RunSpec, train
 from dsfec_jax.train.schedules import Schedule, optimizer
 
 from .elastic import MaskTable, masked_apply, supernet_of
@@ -184,12 +184,12 @@ def finished_supernet(run_dir: str | Path, steps: int) -> dict:
     """{'params', 'batch_stats'} of the supernet run in run_dir, read from its last checkpoint, which
     must be step `steps`'s: how a Ray scoring actor (search.nas.ray_scoring) loads what the driver
     trained, without train.loop's resume (which would append to run.json) and without training."""
-    last = checkpoints(Path(run_dir))
-    step = checkpoint.read_manifest(last[-1]).get("step") if last else None
+    last = last_steps(run_dir)
+    step = read_extra(last[-1]).get("step") if last else None
     if step != steps:
         raise RuntimeError(f"{run_dir}: the supernet is not finished (last checkpoint at step {step}, of {steps}); "
                            "train it first (search.nas.run trains it before any scoring worker starts)")
-    raw = checkpoint.load(last[-1])
+    raw = read_state(last[-1])
     return {"params": raw["params"], "batch_stats": raw["batch_stats"]}
 
 

@@ -77,16 +77,18 @@ def test_cpu_shares_are_disjoint_per_node():
 
 
 def test_an_unfinished_supernet_is_refused(tmp_path):
-    from dsfec_jax.core import checkpoint
+    from dsfec_jax.core.run_checkpoints import RunCheckpoints
     from search.nas.spos import finished_supernet
 
     with pytest.raises(RuntimeError, match="not finished .*step None, of 6"):
         finished_supernet(tmp_path, 6)
     tree = {"params": {"w": np.ones(2, np.float32)}, "batch_stats": {}, "step": np.int32(3)}
-    checkpoint.save(tmp_path / "checkpoints" / "step_0000003.msgpack", tree, {"step": 3})
+    with RunCheckpoints(tmp_path) as checkpoints:
+        checkpoints.save(3, tree, {})
     with pytest.raises(RuntimeError, match="step 3, of 6"):
         finished_supernet(tmp_path, 6)
-    checkpoint.save(tmp_path / "checkpoints" / "step_0000006.msgpack", tree, {"step": 6})
+    with RunCheckpoints(tmp_path) as checkpoints:
+        checkpoints.save(6, tree, {})
     assert finished_supernet(tmp_path, 6)["params"]["w"].tolist() == [1.0, 1.0]
 
 
@@ -116,13 +118,13 @@ def finished_random_supernet(space, run_dir, steps: int) -> None:
     """RUN_DIR/supernet as a finished SPOS run leaves it, with random weights and BN statistics
     instead of `steps` trained steps (training is the command test's; this is about scoring)."""
     from conftest import random_variables
-    from dsfec_jax.core import checkpoint
+    from dsfec_jax.core.run_checkpoints import RunCheckpoints
     from search.nas.elastic import supernet_of
     from search.nas.spos import SupernetDetector
 
     variables = random_variables(SupernetDetector(supernet_of(space)), 0)
-    checkpoint.save(run_dir / "supernet" / "checkpoints" / f"step_{steps:07d}.msgpack",
-                    jax.device_get({**variables, "step": np.int32(steps)}), {"step": steps})
+    with RunCheckpoints(run_dir / "supernet") as checkpoints:
+        checkpoints.save(steps, {**variables, "step": np.int32(steps)}, {})
 
 
 @two_cpus

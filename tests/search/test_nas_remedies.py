@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from dsfec_jax import zoo
-from dsfec_jax.core import atomic, checkpoint
-from dsfec_jax.train.loop import RunMismatch, checkpoints
+from dsfec_jax.core import atomic
+from dsfec_jax.core.run_checkpoints import last_steps, read_extra
+from dsfec_jax.train.loop import RunMismatch
 from search.nas.space import key
 from search.nas.spaces import get_space
 from search.nas.spos import SALT, SANDWICH_CYCLE, SPOSStream, sampling_info, subnet_of_step
@@ -81,7 +82,7 @@ def test_resumed_sandwich_run_equals_an_uninterrupted_one_and_updates_once_a_cyc
     assert not _same(jax.device_get(part["batch_stats"]), jax.device_get(start["batch_stats"]))
     _train(setting, run, 8, "sandwich", stop_at=6)  # resumes mid-cycle: the accumulated gradient is state
     resumed = _train(setting, run, 8, "sandwich")
-    assert checkpoint.read_manifest(checkpoints(run)[-1])["step"] == 8
+    assert read_extra(last_steps(run)[-1])["step"] == 8
     assert not _same(jax.device_get(whole["params"]), jax.device_get(start["params"]))  # 2 updates happened
     assert _same(jax.device_get(resumed["params"]), jax.device_get(whole["params"]))
     assert _same(jax.device_get(resumed["batch_stats"]), jax.device_get(whole["batch_stats"]))
@@ -89,7 +90,7 @@ def test_resumed_sandwich_run_equals_an_uninterrupted_one_and_updates_once_a_cyc
     # the directory refuses the other rule, before anything trains
     with pytest.raises(RunMismatch, match="sampling sandwich"):
         _train(setting, run, 8, "uniform")
-    assert checkpoint.read_manifest(checkpoints(run)[-1])["step"] == 8
+    assert read_extra(last_steps(run)[-1])["step"] == 8
 
 
 def test_a_supernet_dir_refuses_the_other_rule(tmp_path):
@@ -118,7 +119,7 @@ def test_remedies_entry_trains_another_supernet_and_writes_its_row(tmp_path, unc
     argv = [str(run_dir), "--profile", "smoke", "--supernet-steps", "4", "--sampling", "sandwich"]
     assert remedies.main(argv) == 0
     here = run_dir / "remedies" / "sandwich_4"
-    assert checkpoint.read_manifest(checkpoints(here / "supernet")[-1])["step"] == 4
+    assert read_extra(last_steps(here / "supernet")[-1])["step"] == 4
     data = json.loads((run_dir / "remedies.json").read_text())
     (row,) = data["supernets"]
     assert row["name"] == "sandwich_4" and row["sampling"] == "sandwich" and row["supernet_steps"] == 4

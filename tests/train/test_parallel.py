@@ -15,9 +15,8 @@ import jax
 import numpy as np
 import pytest
 
-from dsfec_jax.core import checkpoint
 from dsfec_jax.train import parallel
-from dsfec_jax.train.loop import checkpoints
+from dsfec_jax.core.run_checkpoints import last_steps, read_state
 
 CHECKS = Path(__file__).with_name("parallel_checks.py")
 ROOT = Path(__file__).resolve().parents[2]
@@ -92,7 +91,7 @@ def test_two_processes_train_as_one_and_only_process_0_writes(two_devices, tmp_p
     assert json.loads((runs[0] / "run.json").read_text())["parallel"]["processes"] == 2
     losses = [json.loads(l)["loss"] for l in (runs[0] / "metrics.jsonl").read_text().splitlines()]
     np.testing.assert_allclose(losses, two_devices["resume"]["losses"]["straight"], rtol=1e-5)
-    ours, theirs = (checkpoint.load(checkpoints(r)[-1])["params"] for r in (runs[0], straight))
+    ours, theirs = (read_state(last_steps(r)[-1])["params"] for r in (runs[0], straight))
     assert max(np.max(np.abs(a - b)) for a, b in zip(jax.tree.leaves(ours), jax.tree.leaves(theirs))) < 1e-5
 
 

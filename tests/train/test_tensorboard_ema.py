@@ -4,6 +4,7 @@ tests/train/test_train_step.py checks the EMA inside the real train step."""
 
 import dataclasses
 import json
+import shutil
 
 import jax
 import jax.numpy as jnp
@@ -14,7 +15,8 @@ import pytest
 from dsfec_jax.core import checkpoint
 from dsfec_jax.core.png import png_bytes
 from dsfec_jax.train import ema
-from dsfec_jax.train.loop import RunMismatch, RunSpec, checkpoints, train
+from dsfec_jax.core.run_checkpoints import last_steps, read_state
+from dsfec_jax.train.loop import RunMismatch, RunSpec, train
 from dsfec_jax.train.schedules import get_schedule, learning_rate
 from dsfec_jax.train.sgd_recipe import make_recipe, ultralytics_sgd
 from builders import tensorboard_events
@@ -114,9 +116,9 @@ def test_event_files_hold_the_logged_scalars_and_a_resume_keeps_the_average_exac
     values. The average (validated, checkpointed) ends bit for bit as in a straight run."""
     straight, _ = run(tmp_path, "straight")
     _, spec = run(tmp_path, "resumed", stop_at=4)
-    last = checkpoints(spec.run_dir)[-1]
-    assert last.name == "step_0000004.msgpack"
-    last.unlink()
+    last = last_steps(spec.run_dir)[-1]
+    assert last.name == "step_0000004"
+    shutil.rmtree(last)
     resumed, spec = run(tmp_path, "resumed")
     jax.tree.map(np.testing.assert_array_equal, resumed["ema"], straight["ema"])
     assert int(resumed["ema"]["updates"]) == 6
@@ -154,7 +156,7 @@ def test_tensorboard_can_be_turned_off_and_a_run_from_before_the_average_says_ho
     record = json.loads((tmp_path / "old" / "run.json").read_text())
     del record["schedule"]["ema"]
     (tmp_path / "old" / "run.json").write_text(json.dumps(record))
-    assert "ema" not in checkpoint.load(checkpoints(tmp_path / "old")[-1])
+    assert "ema" not in read_state(last_steps(tmp_path / "old")[-1])
     with pytest.raises(RunMismatch, match=r"schedule\.ema=\"<absent>\"; the command asks schedule\.ema=true.*"
                                           r"started before runs kept a weight EMA: resume it with --no-ema\."):
         run(tmp_path, "old", ema_on=True)

@@ -4,11 +4,11 @@ import jax
 import numpy as np
 import pytest
 
-from dsfec_jax.core import checkpoint
+from dsfec_jax.core.run_checkpoints import last_steps, read_extra, read_state
 from dsfec_jax.data.batches import BatchStream
 from dsfec_jax.data.points.pillarize import PillarSpec
 from dsfec_jax import zoo
-from dsfec_jax.train.loop import RunSpec, TrainingDiverged, checkpoints, train
+from dsfec_jax.train.loop import RunSpec, TrainingDiverged, train
 from dsfec_jax.train.schedules import get_schedule, optimizer
 from dsfec_jax.train.step import init_state, make_train_step
 from conftest import tiny
@@ -36,14 +36,16 @@ def test_batches_are_a_pure_function_of_the_step(tmp_path):
 
 
 def test_resumed_run_ends_with_the_same_parameters(tmp_path, caplog):
-    """Stopped after step 3, and as if killed twice: while saving step 3 (its manifest never
-    landed) and while logging step 4 (a torn last line). The resume goes back to step 2."""
+    """Stopped after step 3, and as if killed twice: while saving step 3 (Orbax's temporary
+    directory, which a kill mid-write leaves) and while logging step 4 (a torn last line). The
+    resume goes back to step 2 and removes the torn step."""
     det, stream, spec = setup(tmp_path, "straight")
     straight, _ = train(det, stream, spec, {"test": True})
     det, stream, spec = setup(tmp_path, "resumed", stop_at=3)
     train(det, stream, spec, {"test": True})
-    assert [p.name for p in checkpoints(spec.run_dir)] == ["step_0000002.msgpack", "step_0000003.msgpack"]
-    checkpoint.manifest_path(checkpoints(spec.run_dir)[-1]).unlink()
+    assert [p.name for p in last_steps(spec.run_dir)] == ["step_0000002", "step_0000003"]
+    torn = last_steps(spec.run_dir)[-1]
+    torn.rename(torn.with_name(torn.name + ".orbax-checkpoint-tmp-1"))
     log_path = spec.run_dir / "metrics.jsonl"
     log_path.write_text(log_path.read_text() + '{"step": 4, "frames_per_s": 1')
     det, stream, spec = setup(tmp_path, "resumed")
@@ -52,9 +54,7 @@ def test_resumed_run_ends_with_the_same_parameters(tmp_path, caplog):
     jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7), straight["params"], resumed["params"])
     steps = [json.loads(l)["step"] for l in log_path.read_text().splitlines()]
     assert steps == [1, 2, 3, 4, 5, 6]
-    assert [p.name for p in checkpoints(spec.run_dir)] == ["step_0000004.msgpack", "step_0000006.msgpack"]  # keep=2
-    assert all(checkpoint.problem(p) is None for p in checkpoints(spec.run_dir))
-    assert "step_0000003.msgpack.json: manifest missing" in caplog.text
+    assert sorted(p.name for p in torn.parent.iterdir()) == ["step_0000004", "step_0000006"]  # keep=2, torn removed
     assert f"{log_path}: dropped its torn last line" in caplog.text
 
 
@@ -68,7 +68,7 @@ def test_a_resume_must_ask_for_the_setup_the_run_started_with(tmp_path):
                "versions": {"jax": "0.1"}}
     det, stream, spec = setup(tmp_path, "run", stop_at=0)
     train(det, stream, spec, started)
-    assert not checkpoints(spec.run_dir)
+    assert not last_steps(spec.run_dir)
     run_json = (spec.run_dir / "run.json").read_text()
     asked = {**started, "seed": 4, "steps": 7, "config": {"stem_filters": 8, "act": "mish"}}
     with pytest.raises(RunMismatch, match=r"run\.json: this run was started with seed=3, steps=6, config\.act=\"relu\"; "
@@ -86,9 +86,9 @@ def test_divergence_stops_with_the_last_good_checkpoint_intact(tmp_path):
     det, stream, spec = setup(tmp_path, "nan", lr=1e12, total=8, ckpt_every=1)
     with pytest.raises(TrainingDiverged, match="Last good checkpoint"):
         train(det, stream, spec, {"test": True})
-    last = checkpoints(spec.run_dir)
+    last = last_steps(spec.run_dir)
     assert last, "at least one good step should have been checkpointed"
-    tree = checkpoint.load(last[-1])
+    tree = read_state(last[-1])
     assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(tree["params"]))
 
 
@@ -127,7 +127,7 @@ def test_runs_are_deterministic_and_losses_read_late_are_the_steps_own(tmp_path)
     det, stream, spec = setup(tmp_path, "sparse", log_every=3)
     train(det, stream, spec, {"test": True})
     assert logged(tmp_path / "sparse") == [r for r in straight if r["step"] in (3, 6)]
-    manifest = json.loads(checkpoint.manifest_path(checkpoints(spec.run_dir)[-1]).read_text())
+    manifest = read_extra(last_steps(spec.run_dir)[-1])
     assert manifest["loss"] == straight[-1]["loss"]
 
 
@@ -150,11 +150,11 @@ def test_divergence_between_log_steps_is_caught_before_the_next_checkpoint(tmp_p
     saved every 3) is named with its step when step 6 is about to be saved, and no checkpoint
     holds the diverged state."""
     det, stream, spec = setup(tmp_path, "nan", total=8, ckpt_every=3, log_every=100)
-    message = r"loss is nan at step 4; stopped\. Last good checkpoint: .*step_0000003\.msgpack"
+    message = r"loss is nan at step 4; stopped\. Last good checkpoint: .*checkpoints/last/step_0000003$"
     with pytest.raises(TrainingDiverged, match=message):
         train(det, poison(stream, at=4), spec, {"test": True})
-    assert [p.name for p in checkpoints(spec.run_dir)] == ["step_0000003.msgpack"]
-    tree = checkpoint.load(checkpoints(spec.run_dir)[-1])
+    assert [p.name for p in last_steps(spec.run_dir)] == ["step_0000003"]
+    tree = read_state(last_steps(spec.run_dir)[-1])
     assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(tree))
 
 

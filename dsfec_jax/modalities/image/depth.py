@@ -16,7 +16,7 @@ Weights files are the zoo's (the network is its auxiliary model 'depth', models/
 {'params'} written by core/checkpoint.save, the manifest naming the model and holding its training
 record with the whole config. `load_depth_predictor` reads them through zoo.auxiliary_config and
 zoo.model_variables: a finished run's or shipped weights, a training checkpoint (checkpoints/
-step_*.msgpack: the whole train state; the config from the run directory's run.json), or a file in
+last/step_N or checkpoints/best: the whole train state; the config from the run directory's run.json), or a file in
 the network's first format (before it joined the zoo), which its record reads.
 """
 

@@ -19,7 +19,7 @@ Optimisation as monodepth_main.py: Adam (b1 0.9, b2 0.999, eps 1e-8), learning r
 at 3/5 and again at 4/5 of the steps, no weight decay, no clipping; the loss is models/depth/loss.py.
 
 The loop is the project's (train/loop.py): RUN_DIR/run.json, metrics.jsonl (loss, its parts,
-grad_norm, frames/s every `log_every` steps), checkpoints/step_*.msgpack (whole train state, last
+grad_norm, frames/s every `log_every` steps), checkpoints/last/step_* (whole train state, last
 3), resumable at the last checkpoint with identical batches. At the end the weights go to
 RUN_DIR/monodepth.msgpack in the zoo's layout, run.json as the manifest's training record
 (depth.load_depth_predictor reads it; `dsfec depth ship` adds the measured figures).
@@ -43,6 +43,7 @@ from ...data.camera.street import StreetConfig, StreetDataset
 from ...metrics.depth.dense import MAX_DEPTH, MIN_DEPTH, depth_errors, mean_errors
 from ...models.depth import MonodepthConfig, MonodepthNet, init_variables
 from ...core import checkpoint
+from ...core.run_checkpoints import read_extra, resolve
 from .depth import WEIGHTS_NAME, MonodepthPredictor, load_depth_variables, resize_image, save_depth_weights
 from ...models.depth.loss import MonodepthLoss, monodepth_loss
 from ...train.loop import RunSpec, run_record, train
@@ -239,8 +240,11 @@ def _init_weights(init: str | Path | None, config: MonodepthConfig) -> tuple[dic
     init_config, variables = load_depth_variables(init)
     if init_config != config:
         raise ValueError(f"{init}: weights of {init_config}; this run trains {config} (same --input expected)")
-    manifest = checkpoint.read_manifest(Path(init))
-    return variables, {"path": str(init), "sha256": manifest.get("sha256"), "step": manifest.get("step")}
+    if Path(init).is_file():
+        manifest = checkpoint.read_manifest(Path(init))
+        return variables, {"path": str(init), "sha256": manifest.get("sha256"), "step": manifest.get("step")}
+    # a training checkpoint (an Orbax step directory): no single file to hash; its step names it
+    return variables, {"path": str(resolve(init)), "sha256": None, "step": read_extra(init).get("step")}
 
 
 def evaluate_dense(predictor: MonodepthPredictor, frames: Sequence, min_depth: float = MIN_DEPTH,

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from ... import zoo
 from ...core import checkpoint
+from ...core.run_checkpoints import run_dir_of
 from ...core.provenance import versions
 from ...data.camera.street import StreetConfig, StreetDataset
 from .depth import WEIGHTS_NAME, MonodepthPredictor, load_depth_variables, save_depth_weights
@@ -87,8 +88,8 @@ def _init_chain(run: dict) -> list[dict]:
     chain = []
     while run.get("init") and len(chain) < MAX_CHAIN:
         init = dict(run["init"])
-        parent = Path(init["path"]).parent
-        parent = parent.parent if parent.name == "checkpoints" else parent
+        path = Path(init["path"])
+        parent = run_dir_of(path) if "checkpoints" in path.parts else path.parent
         if (parent / "run.json").is_file():
             run = _run_json(parent)
             chain.append({**init, "command": run.get("command"), "seed": run.get("seed")})

@@ -71,6 +71,11 @@ def test_training_lowers_the_loss_repeats_and_resumes_exactly(tmp_path):
     jax.tree.map(np.testing.assert_array_equal, start, final)
     record = json.loads((tmp_path / "d" / "run.json").read_text())["init"]
     assert record["path"] == info["weights"] and record["step"] == 30 and len(record["sha256"]) == 64
+    # or from a training checkpoint (an Orbax step directory, or checkpoints/last for its newest): path and step
+    start, _ = fit_depth(tmp_path / "g", **SETUP, init=tmp_path / "c" / "checkpoints" / "last", stop_at=0)
+    jax.tree.map(np.testing.assert_array_equal, start, final)
+    assert json.loads((tmp_path / "g" / "run.json").read_text())["init"] == {
+        "path": str(tmp_path / "c" / "checkpoints" / "last" / "step_0000030"), "sha256": None, "step": 30}
     with pytest.raises(ValueError, match="same --input"):
         fit_depth(tmp_path / "e", **{**SETUP, "config": dataclasses.replace(TINY, width=96)}, init=info["weights"])
 

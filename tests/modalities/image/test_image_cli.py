@@ -37,7 +37,7 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys, uncompiled_init):
     info = json.loads((run / "run.json").read_text())
     assert info["schedule"]["name"] == "yolo3_quick" and info["multi_scale"] == {"sizes": [64], "every": 10}
     assert info["overrides"]["class_names"] == STREET and info["overrides"]["num_classes"] == 5  # from the data
-    best = run / "checkpoints" / "best.msgpack"
+    best = run / "checkpoints" / "best"  # its one step directory: what --weights reads
     assert info["schedule"]["ema"] is True  # the family's weight EMA: eval --weights below reads the average
     assert [e.step for e in tensorboard_events(run).Images("val/predictions")] == [2]
 

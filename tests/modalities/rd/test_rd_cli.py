@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from dsfec_jax import api, cli, zoo
-from dsfec_jax.core import checkpoint
+from dsfec_jax.core.run_checkpoints import best_step, read_state
 from dsfec_jax.modalities.rd import cli as cli_rd
 from dsfec_jax.boxes.boxes2d import Boxes2D
 from dsfec_jax.data.rd.sources import load_rd_samples
@@ -35,10 +35,10 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys, uncompiled_init):
     assert info["model"] == "yolov8n" and info["schedule"]["name"] == "yolo_quick"  # --schedule quick, mapped
     assert info["train_samples"] == 2 and info["val_samples"] == 2 and info["steps"] == 1
     assert info["data"] == {"source": "synthetic", "split": "train"} and info["command"].startswith("dsfec train")
-    best = run / "checkpoints" / "best.msgpack"
-    assert best.is_file()
+    best = run / "checkpoints" / "best"  # its one step directory: what --weights reads
+    assert best_step(run) is not None
     # the family's weight EMA is on, and TensorBoard holds the picture predict draws and the recipe's rates
-    assert info["schedule"]["ema"] is True and "ema" in checkpoint.load(best)
+    assert info["schedule"]["ema"] is True and "ema" in read_state(best)
     board = tensorboard_events(run)
     assert [e.step for e in board.Images("val/predictions")] == [1] and "train/lr/weight" in board.Tags()["scalars"]
 
