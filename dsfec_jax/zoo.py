@@ -280,13 +280,13 @@ def load_variables(model: Detector | AuxiliaryNet, path: str | Path) -> dict:
         raise ValueError(f"{path}: expected a variables tree with {missing}; found keys {sorted(weights_of(raw))}")
     target = model.variable_shapes()
 
-    def shaped(tree: dict) -> dict:  # the model's collections shape-checked, the rest as stored
+    def shaped(tree: dict, where: str = "") -> dict:  # the model's collections shape-checked, the rest as stored
         kept = [k for k in model.collections if k in tree]
-        return {**tree, **checkpoint.restored(path, {k: tree[k] for k in kept}, {k: target[k] for k in kept})}
+        return {**tree, **checkpoint.restored(path, {k: tree[k] for k in kept}, {k: target[k] for k in kept}, where)}
 
     loaded = shaped(raw)
     if EMA_KEY in raw:
-        loaded[EMA_KEY] = shaped(raw[EMA_KEY])
+        loaded[EMA_KEY] = shaped(raw[EMA_KEY], f"[{EMA_KEY!r}]")
     weights = weights_of(loaded)  # a run's weight average, where it kept one (what it validated)
     # on the device once: a jitted call converts every numpy argument again on every call (the cost:
     # docs/range-doppler.md, Deploy)

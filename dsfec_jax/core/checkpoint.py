@@ -82,12 +82,13 @@ def load(path: str | os.PathLike, target=None):
     return raw if target is None else restored(path, raw, target)
 
 
-def restored(path: str | os.PathLike, raw: dict, target):
-    """`raw` (a state dict read from PATH) in the structure of `target`, every shape checked."""
+def restored(path: str | os.PathLike, raw: dict, target, where: str = ""):
+    """`raw` (a state dict read from PATH) in the structure of `target`, every shape checked;
+    `where` names the subtree of PATH that `raw` is, for the message (e.g. "['ema']")."""
     tree = flax.serialization.from_state_dict(target, raw)
     for (kp, a), b in zip(jax.tree_util.tree_flatten_with_path(target)[0], jax.tree.leaves(tree)):
         if np.shape(a) != np.shape(b):
-            raise ValueError(f"{path}: {jax.tree_util.keystr(kp)} has shape {np.shape(b)}, the model expects {np.shape(a)}")
+            raise ValueError(f"{path}: {where}{jax.tree_util.keystr(kp)} has shape {np.shape(b)}, the model expects {np.shape(a)}")
     return tree
 
 
