@@ -164,15 +164,14 @@ def boxes2d_scene(n_images=24, seed=0, sloppiness=1.0):
 # Imported at start-up by every Python process that finds it on PYTHONPATH: registers `tiny_s`
 # (conftest.tiny's dsfec_s) with an init that compiles nothing (slow, and not what the tests of
 # a CLI's processes are about), so the real entry points and their worker processes run in seconds.
-TINY_MODEL_SITE = """
+# An init that compiles nothing: the variables of init's shapes, filled with small random values.
+QUICK_INIT = """
 import jax
 import numpy as np
 
 from dsfec_jax import zoo
 from dsfec_jax.core.grid import Grid
 
-zoo.REGISTRY["tiny_s"] = zoo.create("dsfec_s", name="tiny_s", max_pillars=96, max_points=4,
-    grid=Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)).config
 _init = zoo.Detector.init
 
 
@@ -187,6 +186,10 @@ def quick_init(self, rng):
 
 
 zoo.Detector.init = quick_init
+"""
+TINY_MODEL_SITE = QUICK_INIT + """
+zoo.REGISTRY["tiny_s"] = zoo.create("dsfec_s", name="tiny_s", max_pillars=96, max_points=4,
+    grid=Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)).config
 """
 
 

@@ -1,4 +1,5 @@
 import json
+import textwrap
 
 import pytest
 
@@ -9,6 +10,7 @@ from search.activations import activation_candidates
 from search.journal import Journal
 from search.space import SearchSpaceError, candidates, parse_axis
 from dsfec_jax.train.schedules import get_schedule
+from builders import QUICK_INIT
 from conftest import tiny
 
 
@@ -165,29 +167,11 @@ RAY_WORKER_SITE = """
 import sys
 
 if sys.argv and sys.argv[0].endswith("default_worker.py"):
-    import jax
-    import numpy as np
-
-    from dsfec_jax import zoo
-    from dsfec_jax.core.grid import Grid
-
-    zoo.REGISTRY["tiny_l"] = zoo.create(
-        "dsfec_l", name="tiny_l", stage_blocks=(1, 2, 1, 1), head_convs=1, max_pillars=96, max_points=4,
-        grid=Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)).config
-
-    _init = zoo.Detector.init
-
-    def quick_init(self, rng):
-        gen = np.random.default_rng(0)
-
-        def fill(path, leaf):
-            low, high = (0.5, 1.5) if path[-1].key == "var" else (-0.1, 0.1)
-            return jax.numpy.asarray(gen.uniform(low, high, leaf.shape), leaf.dtype)
-
-        return jax.tree_util.tree_map_with_path(fill, jax.eval_shape(lambda r: _init(self, r), rng))
-
-    zoo.Detector.init = quick_init
-"""
+""" + textwrap.indent(QUICK_INIT + """
+zoo.REGISTRY["tiny_l"] = zoo.create(
+    "dsfec_l", name="tiny_l", stage_blocks=(1, 2, 1, 1), head_convs=1, max_pillars=96, max_points=4,
+    grid=Grid(x_range=(0.0, 16.0), y_range=(-8.0, 8.0), z_range=(-2.5, 2.5), cell=0.5)).config
+""", "    ")
 
 
 def test_ray_backend_runs_a_two_trial_sweep(tiny_search, tmp_path, monkeypatch):
