@@ -7,6 +7,7 @@ import json
 import os
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from dsfec_jax.boxes.boxes2d import Boxes2D
@@ -207,3 +208,17 @@ def tensorboard_events(run_dir):
     reader = EventAccumulator(str(run_dir), size_guidance={"scalars": 0, "images": 0})
     reader.Reload()
     return reader
+
+
+def assert_rows_are_the_batch_rows(stream, step: int, rows: slice) -> None:
+    """`stream.batch(step, rows)` (a process's share of a global batch, train/parallel.py) holds
+    exactly those rows of the whole batch; per-step inputs (a subnet's masks) whole."""
+    from dsfec_jax.train.parallel import PER_STEP_INPUTS
+
+    whole, part = stream.batch(step), stream.batch(step, rows)
+    per_step = set(whole.get(PER_STEP_INPUTS, ()))
+    assert part["inputs"].keys() == whole["inputs"].keys() and part["window"] == whole["window"]
+    for key, value in whole["inputs"].items():
+        cut = (lambda a: a) if key in per_step else (lambda a: a[rows])
+        jax.tree.map(lambda w, p: np.testing.assert_array_equal(cut(np.asarray(w)), p), value, part["inputs"][key])
+    jax.tree.map(lambda w, p: np.testing.assert_array_equal(np.asarray(w)[rows], p), whole["targets"], part["targets"])

@@ -95,11 +95,14 @@ class BatchStream:
             return int(occupied[rng.integers(len(occupied))])
         return int(rng.integers(len(self.specs)))
 
-    def batch(self, step: int) -> dict:
-        """Inputs, targets and pillarization stats of step `step`, and the index of its window."""
+    def batch(self, step: int, rows: slice = slice(None)) -> dict:
+        """Inputs, targets and pillarization stats of step `step`, and the index of its window;
+        `rows`: only those rows of it (a process's share of a global batch: train/parallel.py).
+        Every frame is augmented (one draw sequence per step, and the window may depend on all
+        of them) but only the rows' frames are pillarized, which is where the time goes."""
         rng = np.random.default_rng([self.seed, 1_000_003, step])
         frames = [self.frames[int(i)] for i in self.indices(step)]
         if self.augment_cfg is not None:
             frames = [augment(f, self.augment_cfg, rng) for f in frames]
         window = self.window(step, frames)
-        return {**collate(frames, self.specs[window], self.targets_fn, self.origin_input), "window": window}
+        return {**collate(frames[rows], self.specs[window], self.targets_fn, self.origin_input), "window": window}

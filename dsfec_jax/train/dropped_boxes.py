@@ -5,12 +5,16 @@ data/rd/batches.py and models/camera/targets.py, so the jitted step compiles onc
 boxes a crowded image loses in stats['dropped_boxes']. A run that silently trains without some of
 its ground truth learns a different task, so the loop writes the count to metrics.jsonl (the boxes
 cut off since the previous row) and warns once per run, at the first batch that loses any, with
-the count and the cap. Streams without the stat (point clouds) add no column.
+the count and the cap. Streams without the stat (point clouds) add no column. With several
+processes each counts the rows it built, and the row sums them over the processes.
 """
 
 from __future__ import annotations
 
 import logging
+
+import jax
+import numpy as np
 
 log = logging.getLogger(__name__)
 
@@ -42,5 +46,9 @@ class DroppedBoxes:
         """The metrics row's column ({} for a stream without the stat); restarts the count."""
         if not self.reported:
             return {}
-        out, self.since_row = {"dropped_boxes": self.since_row}, 0
-        return out
+        count, self.since_row = self.since_row, 0
+        if jax.process_count() > 1:  # every process writes a row at the same step: a collective is safe
+            from jax.experimental import multihost_utils
+
+            count = int(np.sum(multihost_utils.process_allgather(np.int64(count))))
+        return {"dropped_boxes": count}

@@ -228,7 +228,7 @@ def train(detector, stream: BatchStream, spec: RunSpec, run_info: dict,
     t0 = time.perf_counter()
 
     def ready_batch(step: int) -> dict:  # built, and copied into XLA buffers, in the worker
-        return layout.batch_on_devices(stream.batch(step))
+        return layout.local_batch(stream, step)
 
     rates = None if hasattr(detector, "optimizer") else schedule_rates(spec.schedule, spec.total_steps)
     with ckpts, open(log_path if writer else os.devnull, "a") as log, Prefetcher(ready_batch, range(start, end)) as batches, \

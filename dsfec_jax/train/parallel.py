@@ -14,9 +14,11 @@ coordinator the command was given (`--coordinator HOST:PORT --num-processes N --
 or with JAX's own detection of a cluster launcher (SLURM, Open MPI, ...) for `--coordinator
 auto`, or where JAX_COORDINATOR_ADDRESS is set (JAX's own variable; the count and index then come
 from the flags or the launcher).
-Every process runs the same loop in lock step; each builds the global batch (a pure function of
-(seed, step), data/batches.py) and hands only its own rows to its own devices
-(jax.make_array_from_process_local_data). Only the writer (process 0: `is_writer`) writes run
+Every process runs the same loop in lock step; each builds only its own rows of the global batch
+(`local_batch`: a stream's batch is a pure function of (seed, step), and its `rows` argument builds
+a slice of it with the rows' own augmentation, data/batches.py) and hands them to its own devices
+(jax.make_array_from_process_local_data). Inputs that are the same for every row (a supernet's
+subnet masks: the batch's PER_STEP_INPUTS) are replicated, not split. Only the writer (process 0: `is_writer`) writes run
 files. The coordination service has no authentication: it binds only to the address given,
 never to every interface (JAX's default), so a run on 127.0.0.1 listens on loopback only.
 
@@ -38,6 +40,8 @@ DATA_AXIS = "data"
 AUTO = "auto"  # --coordinator auto: JAX detects the cluster launcher (jax.distributed's ClusterEnv)
 CPU_COLLECTIVES = "gloo"  # cross-process collectives on the CPU backend (jax_cpu_collectives_implementation)
 FORCE_FLAG = "--xla_force_host_platform_device_count"
+# a batch's key naming the inputs that are the same for every row (not split over the mesh)
+PER_STEP_INPUTS = "per_step_inputs"
 
 
 class ParallelError(ValueError):
@@ -160,22 +164,39 @@ class Layout:
 
     def step(self, step_fn):
         """`step_fn(state, batch) -> (state, metrics)` (jitted or not) jitted on the mesh: state in
-        and out replicated (and donated, as the one-device step donates it), the batch sharded."""
+        and out replicated (and donated, as the one-device step donates it), the batch placed by
+        batch_on_devices."""
         if self.single:
             return step_fn
-        return jax.jit(step_fn, in_shardings=(self.replicated, self.batch_sharding),
+        # the batch keeps the placement batch_on_devices gave each leaf: split rows, whole per-step inputs
+        return jax.jit(step_fn, in_shardings=(self.replicated, None),
                        out_shardings=(self.replicated, self.replicated), donate_argnums=0)
 
+    def local_batch(self, stream, step: int) -> dict:
+        """Batch `step` of `stream` on the mesh, this process having built only its own rows."""
+        if self.single:
+            return batch_on_device(stream.batch(step))
+        return self.batch_on_devices(stream.batch(step, rows=self.local_rows(stream.batch_size)))
+
     def batch_on_devices(self, batch: dict) -> dict:
-        """`batch` (the global batch) with this process's rows of its 'inputs' and 'targets' on
-        its devices, as one global array per leaf sharded on the batch axis; the copies finished
-        (train.step.batch_on_device says why)."""
+        """`batch` (this process's rows of the global batch) on the mesh: each leaf of its
+        'inputs' and 'targets' one global array sharded on the batch axis, but for the inputs
+        named in its PER_STEP_INPUTS, which every process holds whole and which are replicated;
+        the copies finished (train.step.batch_on_device says why)."""
         if self.single:
             return batch_on_device(batch)
-        arrays = {"inputs": batch["inputs"], "targets": batch["targets"]}
-        rows = self.local_rows(len(jax.tree.leaves(arrays)[0]))
-        placed = jax.tree.map(lambda a: jax.make_array_from_process_local_data(
-            self.batch_sharding, np.asarray(a)[rows], np.shape(a)), arrays)
+        per_step = set(batch.get(PER_STEP_INPUTS, ()))
+
+        def rows(a):
+            a = np.asarray(a)
+            return jax.make_array_from_process_local_data(self.batch_sharding, a,
+                                                          (len(a) * jax.process_count(),) + a.shape[1:])
+
+        def whole(a):
+            return jax.make_array_from_process_local_data(self.replicated, np.asarray(a))
+
+        inputs = {k: jax.tree.map(whole if k in per_step else rows, v) for k, v in batch["inputs"].items()}
+        placed = {"inputs": inputs, "targets": jax.tree.map(rows, batch["targets"])}
         return {**batch, **jax.block_until_ready(placed)}
 
     def local_rows(self, batch_size: int) -> slice:

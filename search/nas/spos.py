@@ -43,6 +43,7 @@ from dsfec_jax.modalities.rd.predict import RDPredictor
 from dsfec_jax.profile import counting
 from dsfec_jax.modalities.rd.profile import folded_params
 from dsfec_jax.train.loop import RunMismatch, RunSpec, train
+from dsfec_jax.train.parallel import PER_STEP_INPUTS
 from dsfec_jax.train.schedules import Schedule, optimizer
 
 from .elastic import MaskTable, masked_apply, supernet_of
@@ -154,9 +155,12 @@ class SPOSStream:
     def genes(self, step: int) -> Genes:
         return subnet_of_step(self.space, self.seed, step, self.sampling)
 
-    def batch(self, step: int) -> dict:
-        batch = self.stream.batch(step)
-        return {**batch, "inputs": {**batch["inputs"], **self.subnet_inputs(self.genes(step))}}
+    def batch(self, step: int, rows: slice = slice(None)) -> dict:
+        """`rows`: only those rows of the inner stream's batch; the subnet's inputs are whole (one
+        subnet a step), and named so that a mesh replicates them (train/parallel.py)."""
+        batch = self.stream.batch(step, rows)
+        subnet = self.subnet_inputs(self.genes(step))
+        return {**batch, "inputs": {**batch["inputs"], **subnet}, PER_STEP_INPUTS: tuple(subnet)}
 
 
 def train_supernet(space: SearchSpace, samples, schedule: Schedule, run_dir: str | Path, steps: int, seed: int = 0,

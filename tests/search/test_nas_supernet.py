@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 from dsfec_jax import zoo
+from dsfec_jax.train.parallel import PER_STEP_INPUTS
 from search.nas import elastic
 from search.nas.spaces import get_space
+from builders import assert_rows_are_the_batch_rows
 from conftest import random_fill
 
 
@@ -88,15 +90,17 @@ def test_mask_table_and_spos_draws(supernet):
     class Batches:  # a stand-in stream: SPOSStream only adds the subnet to its batches
         batch_size = 2
 
-        def batch(self, s):
-            return {"inputs": {"heat": np.full((1,), s)}, "targets": {}, "window": 0}
+        def batch(self, s, rows=slice(None)):
+            return {"inputs": {"heat": np.full((2,), s)[rows]}, "targets": {}, "window": 0}
 
     a, b = SPOSStream(Batches(), space, subnet_inputs, seed=0), SPOSStream(Batches(), space, subnet_inputs, seed=1)
     draws = [a.genes(s) for s in range(6)]
     assert draws == [a.genes(s) for s in range(6)] and len(set(draws)) == 6  # a pure function of (seed, step)
     assert draws != [b.genes(s) for s in range(6)]
     batch = a.batch(3)
-    assert batch["inputs"]["heat"][0] == 3 and batch["window"] == 0 and batch.keys() == {"inputs", "targets", "window"}
+    assert batch["inputs"]["heat"][0] == 3 and batch["window"] == 0
+    assert batch.keys() == {"inputs", "targets", "window", PER_STEP_INPUTS} and batch[PER_STEP_INPUTS] == ("masks", "nas")
+    assert_rows_are_the_batch_rows(a, 3, slice(1, 2))  # a process's row, with the whole subnet
     assert all(np.array_equal(batch["inputs"]["masks"][k], v) for k, v in subnet_inputs(a.genes(3))["masks"].items())
     assert a.batch_size == 2
 

@@ -29,6 +29,7 @@ sys.path.insert(0, str(TESTS))
 STEPS = 2  # steps each family's one-device and sharded step are compared over
 BATCH = 2  # the global batch: one row per device
 TOTAL = 3  # steps of the runs through train.loop
+ROWS_BUILT: set[int] = set()  # the rows counts the runs' batches were built with
 # Plain SGD with momentum (darknet's): an update proportional to the gradient, so parameters agree
 # as closely as the gradients do. Adam would not show it: a gradient that is zero in exact
 # arithmetic (a bias ahead of BatchNorm) is float noise of either sign, and Adam scales any
@@ -129,8 +130,13 @@ def points_stream(det):
     from dsfec_jax.data.points.pillarize import PillarSpec
     import numpy as np
 
+    class RowsCounted(BatchStream):  # the rows each batch built (ROWS_BUILT): a process builds its own only
+        def batch(self, step, rows=slice(None)):
+            ROWS_BUILT.add(len(range(self.batch_size)[rows]))
+            return super().batch(step, rows)
+
     frames = [toy_frame(np.random.default_rng(i), det.config.grid) for i in range(4)]
-    return BatchStream(frames, PillarSpec.of(det.config), zoo.family_of(det.config).points.targets(det.config),
+    return RowsCounted(frames, PillarSpec.of(det.config), zoo.family_of(det.config).points.targets(det.config),
                        batch_size=BATCH, seed=7)
 
 
@@ -190,7 +196,8 @@ def process_mode(index: int, port: int, run_dir: Path, result: Path) -> None:
     parallel.start(parallel.Launch(devices=1, coordinator=f"127.0.0.1:{port}", num_processes=2, process_id=index))
     state = run_points(run_dir, 1)
     result.write_text(json.dumps({"process": jax.process_index(), "processes": jax.process_count(),
-                                  "devices": len(state["step"].sharding.device_set), "step": int(state["step"])}))
+                                  "devices": len(state["step"].sharding.device_set), "step": int(state["step"]),
+                                  "rows_built": sorted(ROWS_BUILT)}))
 
 
 def main(argv: list[str]) -> None:

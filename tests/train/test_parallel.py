@@ -87,6 +87,7 @@ def test_two_processes_train_as_one_and_only_process_0_writes(two_devices, tmp_p
     assert [c.returncode for c in children] == [0, 0], [e[-3000:] for e in errors]
     results = [json.loads((tmp_path / f"process{i}.json").read_text()) for i in range(2)]
     assert [(r["process"], r["processes"], r["devices"], r["step"]) for r in results] == [(0, 2, 2, 3), (1, 2, 2, 3)]
+    assert [r["rows_built"] for r in results] == [[1], [1]]  # each built its own row of the global batch of 2
     straight = two_devices["dir"] / "straight"
     assert json.loads((run / "run.json").read_text())["parallel"]["processes"] == 2
     # process 1 wrote none of the run's files: one row a step (the straight run's), one event file

@@ -12,7 +12,7 @@ from dsfec_jax.train.loop import RunSpec, TrainingDiverged, train
 from dsfec_jax.train.schedules import get_schedule, optimizer
 from dsfec_jax.train.step import init_state, make_train_step
 from conftest import tiny
-from builders import toy_frame
+from builders import assert_rows_are_the_batch_rows, toy_frame
 
 
 def setup(tmp_path, name, lr=2e-3, total=6, stop_at=None, ckpt_every=2, log_every=1):
@@ -33,6 +33,11 @@ def test_batches_are_a_pure_function_of_the_step(tmp_path):
     a, b = stream.batch(4), stream.batch(4)
     jax.tree.map(np.testing.assert_array_equal, a["inputs"], b["inputs"])
     assert sorted(np.concatenate([stream.indices(s) for s in range(3)]).tolist()) == list(range(6))
+
+
+def test_a_slice_of_rows_is_those_rows_of_the_batch(tmp_path):
+    _, stream, _ = setup(tmp_path, "x")
+    assert_rows_are_the_batch_rows(stream, 4, slice(1, 2))
 
 
 def test_resumed_run_ends_with_the_same_parameters(tmp_path, caplog):

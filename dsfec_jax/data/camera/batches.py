@@ -128,9 +128,10 @@ class CameraBatchStream:
         rng = np.random.default_rng(np.random.SeedSequence((self.seed, AUGMENT_TAG, int(step), i)))
         return augment_image(item, hw, rng, self.augment)
 
-    def batch(self, step: int) -> dict:
-        """Batch `step` in BatchStream's layout (train/loop.py): inputs, targets, window 0, stats."""
-        images, boxes = zip(*(self.sample(step, i) for i in range(self.batch_size)))
+    def batch(self, step: int, rows: slice = slice(None)) -> dict:
+        """Batch `step` in BatchStream's layout (train/loop.py): inputs, targets, window 0, stats;
+        `rows`: only those rows (each image draws its own augmentation, so a slice is the same rows)."""
+        images, boxes = zip(*(self.sample(step, i) for i in range(self.batch_size)[rows]))
         targets, dropped = self.targets_fn(list(boxes))
         return {"inputs": {"image": np.stack(images).astype(np.float32) / 255.0},
                 "targets": {k: targets[k] for k in TARGET_KEYS}, "window": 0,

@@ -109,18 +109,20 @@ class RDBatchStream:
         rng = np.random.default_rng(np.random.SeedSequence((self.seed, AUGMENT_TAG, int(step), i)))
         return augment_sample(sample, rng, self.augment)
 
-    def arrays(self, step: int) -> dict:
-        """Batch `step` as one flat dict of the inputs and targets, plus 'dropped_boxes' (an int)."""
+    def arrays(self, step: int, rows: slice = slice(None)) -> dict:
+        """Batch `step` (only its `rows`, where given) as one flat dict of the inputs and targets,
+        plus 'dropped_boxes' (an int)."""
         per_sample, dropped = [], 0
-        for i in range(self.batch_size):
+        for i in range(self.batch_size)[rows]:
             arrays, n = padded_targets(self.sample(step, i), self.representation, self.classes, self.max_boxes)
             per_sample.append(arrays)
             dropped += n
         return {**stack(per_sample), "dropped_boxes": dropped}
 
-    def batch(self, step: int) -> dict:
-        """Batch `step` in BatchStream's layout (train/loop.py): inputs, targets, window 0, stats."""
-        arrays = self.arrays(step)
+    def batch(self, step: int, rows: slice = slice(None)) -> dict:
+        """Batch `step` in BatchStream's layout (train/loop.py): inputs, targets, window 0, stats;
+        `rows`: only those rows (each sample draws its own augmentation, so a slice is the same rows)."""
+        arrays = self.arrays(step, rows)
         return {"inputs": {k: arrays[k] for k in INPUT_KEYS}, "targets": {k: arrays[k] for k in TARGET_KEYS},
                 "window": 0, "stats": {"boxes": int(arrays["gt_mask"].sum()),
                                        "dropped_boxes": arrays["dropped_boxes"]}}

@@ -96,9 +96,10 @@ class DepthBatchStream:
         order = np.random.default_rng((self.seed, epoch)).permutation(len(self.left))
         return order[k * self.batch_size:(k + 1) * self.batch_size]
 
-    def batch(self, step: int) -> dict:
+    def batch(self, step: int, rows: slice = slice(None)) -> dict:
+        """`rows`: only those rows of the batch (each pair draws its own augmentation)."""
         lefts, rights = [], []
-        for i, index in enumerate(self.indices(step)):
+        for i, index in list(enumerate(self.indices(step)))[rows]:
             left = self.left[index].astype(np.float32) / 255.0
             right = self.right[index].astype(np.float32) / 255.0
             if self.augment is not None:

@@ -9,6 +9,7 @@ import functools
 
 import numpy as np
 import pytest
+from builders import assert_rows_are_the_batch_rows
 from conftest import shared_data_dir
 
 from dsfec_jax.boxes.boxes2d import Boxes2D
@@ -136,6 +137,10 @@ def test_batches_are_shaped_and_a_pure_function_of_seed_and_step():
     assert not np.array_equal(other["inputs"]["image"], b["inputs"]["image"][:, :other["inputs"]["image"].shape[1]]
                               ) or other["inputs"]["image"].shape != b["inputs"]["image"].shape
     assert sorted(np.concatenate([s.indices(k) for k in range(2)]).tolist()) == [0, 1, 2, 3]  # an epoch
+
+
+def test_a_slice_of_rows_is_those_rows_of_the_batch():
+    assert_rows_are_the_batch_rows(stream(), 3, slice(1, 2))
 
 
 def test_multi_scale_sizes_are_darknets_and_drawn_per_block():

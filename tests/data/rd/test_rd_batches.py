@@ -4,6 +4,7 @@ follow the augmentation, class indices, and the evaluation inputs' way back to m
 import jax
 import numpy as np
 import pytest
+from builders import assert_rows_are_the_batch_rows
 
 from dsfec_jax.boxes.boxes2d import Boxes2D
 from dsfec_jax.data.prefetch import Prefetcher
@@ -44,6 +45,10 @@ def test_a_stream_made_at_step_s_gives_the_uninterrupted_step_s_batch():
     resumed = RDBatchStream(SYNTHETIC, 3, seed=1, augment=WITH_NOISE, max_boxes=16)
     for s in (5, 2):
         assert_batches_equal(resumed.batch(s), uninterrupted[s])
+
+
+def test_a_slice_of_rows_is_those_rows_of_the_batch():
+    assert_rows_are_the_batch_rows(RDBatchStream(SYNTHETIC, 3, seed=1, augment=WITH_NOISE, max_boxes=16), 4, slice(1, 3))
 
 
 def test_an_epoch_visits_distinct_samples_and_epochs_reshuffle():

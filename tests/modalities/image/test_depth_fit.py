@@ -7,6 +7,7 @@ import json
 import jax
 import numpy as np
 import pytest
+from builders import assert_rows_are_the_batch_rows
 
 from dsfec_jax.data.camera.street import StreetConfig
 from dsfec_jax.models.depth import TINY
@@ -39,6 +40,10 @@ def test_batches_are_a_pure_function_of_seed_and_step(pairs):
     assert not np.array_equal(a["inputs"]["left"], DepthBatchStream(*pairs, 2, seed=1).batch(7)["inputs"]["left"])
     epoch = np.concatenate([stream.indices(s) for s in range(3)])
     assert sorted(epoch) == list(range(6))  # each frame once per epoch
+
+
+def test_a_slice_of_rows_is_those_rows_of_the_batch(pairs):
+    assert_rows_are_the_batch_rows(DepthBatchStream(*pairs, batch_size=2, seed=0), 7, slice(1, 2))
 
 
 def test_flip_mirrors_and_swaps_the_pair(pairs):
