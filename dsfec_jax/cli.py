@@ -306,19 +306,19 @@ def ship_source(args) -> tuple[Path, dict]:
     return (best if args.checkpoint == "best" else last[-1]), info
 
 
-def measure_benchmark(predictor, family, split: str, frames: int) -> dict:
+def measure_benchmark(predictor, family, split: str, frames: int, source: str | None = None) -> dict:
     """What a weights manifest records: the family's protocol on `frames` items of `split` of its
-    embedded synthetic benchmark (data seed 0), the keys its protocol keeps."""
+    embedded synthetic benchmark (or of `source`; data seed 0), the keys its protocol keeps."""
     from .core import progress
     from .modalities.registry import modality_named, protocol
 
+    source = source or family.benchmark
     # generating the benchmark and validating on it (the first split also compiles the predictor)
-    with progress.stage(f"measuring {family.metric.name} on {frames} {split} frames of {family.benchmark} "
-                        f"for the manifest"):
-        data = modality_named(family.modality).load_samples(family, family.benchmark, split, frames, 0)
+    with progress.stage(f"measuring {family.metric.name} on {frames} {split} frames of {source} for the manifest"):
+        data = modality_named(family.modality).load_samples(family, source, split, frames, 0)
         scores, _ = protocol(family.metric.name).validate(predictor, data)
     return {k: scores[k] for k in family.metric.keep} | {
-        "frames": frames, "data_seed": 0, "data": family.benchmark, "protocol": family.metric.name}
+        "frames": frames, "data_seed": 0, "data": source, "protocol": family.metric.name}
 
 
 def run_ship(args) -> int:

@@ -43,7 +43,7 @@ def parse(argv=None) -> argparse.Namespace:
     i.add_argument("--previews", type=non_negative_int, default=3, help="RD and street sources: number of previews")
     i.add_argument("--colormap", default="viridis", choices=COLORMAPS, help="RD sources: the heatmap's colormap")
     i.add_argument("--benchmark", type=int, default=None, choices=BENCHMARK_VERSIONS,
-                   help="rd-synthetic: the benchmark version (default 1, the shipped RD weights' until they are retrained; 2: issue 54's clutter, IF chain and coupling)")
+                   help="rd-synthetic: the benchmark version (default 2, issue 54's clutter, IF chain and coupling, the shipped RD weights'; 1: before it)")
     i.add_argument("--versus", default=None, metavar="SOURCE[:PATH]",
                    help="RD sources: another source's map structure beside this one's, e.g. ti-adc:DIR")
     i.add_argument("--json", action="store_true")

@@ -44,12 +44,18 @@ PROFILES = {
 }
 
 
+def rd_benchmark(space: SearchSpace) -> str:
+    """The RD data a space's supernet trains and is scored on: its family's benchmark, the maps the
+    shipped weights (the report's references) were trained and measured on."""
+    return zoo.family_of(space.base).benchmark
+
+
 def supernet(space: SearchSpace, p: NasProfile, run_dir: Path, seed: int = 0, progress: bool = True,
              load_only: bool = False):
     """The profile's training maps, SPOS step count and (detector, subnet inputs, state) of the run's
     supernet: trained, or resumed from RUN_DIR/supernet (nothing trains once it is finished);
     `load_only`: the finished supernet read from its last checkpoint, nothing trained or written."""
-    train = load_rd_samples("synthetic", "train", p.train_samples)
+    train = load_rd_samples(rd_benchmark(space), "train", p.train_samples)
     schedule = get_schedule(p.schedule, batch_size=p.batch_size)
     steps = p.supernet_steps or schedule.total_steps(len(train))
     return train, steps, train_supernet(space, train, schedule, run_dir / "supernet", steps, seed, progress,
@@ -79,10 +85,10 @@ def rd_engine(space: SearchSpace, p: NasProfile, profile: str, run_dir: Path, se
               load_only: bool = False, sampling: str = "uniform") -> Engine:
     if sampling != "uniform":
         raise ValueError(f"--sampling {sampling}: the RD supernet trains with uniform sampling only (sandwich: DSFEC-style spaces)")
-    val = load_rd_samples("synthetic", "val", p.val_samples)
+    val = load_rd_samples(rd_benchmark(space), "val", p.val_samples)
     train, steps, (det, subnet_inputs, state) = supernet(space, p, run_dir, seed, progress, load_only)
     scorer = SubnetScorer(det, subnet_inputs, state, train, val, seed, p.calibration_batches, p.batch_size, progress)
-    return Engine(steps, scorer, "mAP50", f"synthetic RD benchmark, {len(val)} val maps",
+    return Engine(steps, scorer, "mAP50", f"synthetic RD benchmark ({rd_benchmark(space)}), {len(val)} val maps",
                   f"{p.calibration_batches} batches of {p.batch_size} maps", shipped=("yolov8n", space.base))
 
 

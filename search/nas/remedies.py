@@ -50,7 +50,7 @@ from dsfec_jax.core.run_checkpoints import last_steps, read_state
 from ..journal import Journal
 from ..ranking import kendall_tau, tau_p_value
 from ..recipes import get_recipe
-from .engines import PROFILES, RD_ENGINE, supernet
+from .engines import PROFILES, RD_ENGINE, rd_benchmark, supernet
 from .run import accumulated_seconds
 from .space import from_key
 from .spaces import get_space
@@ -208,7 +208,7 @@ def main(argv=None) -> int:
     keys = [pair["key"] for pair in study["pairs"]]
     val_counts = [int(v) for v in args.val_samples.split(",")]
     batch_counts = [int(v) for v in args.calibration_batches.split(",")]
-    val_all = load_rd_samples("synthetic", "val", max(val_counts))
+    val_all = load_rd_samples(rd_benchmark(space), "val", max(val_counts))
     train, _, (det, subnet_inputs, state) = supernet(space, prof, run_dir, args.seed, progress=False)
     alone = standalone_predictors(run_dir, keys)
     inherited_journal = {r["key"]: r[METRIC] for r in Journal(run_dir).records() if r.get("status") == "ok"}

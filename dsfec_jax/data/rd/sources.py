@@ -1,9 +1,9 @@
 """Named RD sources -> lists of RDSample, what training, evaluation and the commands read.
 
 `synthetic` (or `rd-synthetic`: the embedded FMCW benchmark, generated; splits train/val/test;
-`synthetic:v1` is the benchmark before issue 54's realism, which the shipped RD weights and their
-records were made on, and what plain `synthetic` means until they are retrained (config.DEFAULT_BENCHMARK);
-`synthetic:v2` adds static clutter, the IF chain's shape and the Tx->Rx coupling),
+`synthetic:v1` is the benchmark before issue 54's realism, which the records of that time were
+made on; `synthetic:v2`, what plain `synthetic` means (config.DEFAULT_BENCHMARK) and what the
+shipped RD weights are trained on, adds static clutter, the IF chain's shape and the Tx->Rx coupling),
 `raddet:PATH` (a RADDet root holding train/ and test/ split folders, or one split folder) and
 `carrada:PATH` (a CARRADA root with its sequence split file). Samples are materialised once:
 a training run visits each many times, and re-simulating a map per visit would cost the host the

@@ -54,7 +54,7 @@ def config_fields(args, overrides: dict) -> dict:
 def default_train_samples(data: str) -> int | None:
     """Samples to train on when --frames is not given: TRAIN_SAMPLES generated ones for the
     synthetic benchmark, the whole split (None) of a real source."""
-    return TRAIN_SAMPLES if data in ("synthetic", "rd-synthetic") else None
+    return TRAIN_SAMPLES if data.partition(":")[0] in ("synthetic", "rd-synthetic") else None
 
 
 def _samples(args, split: str, count: int | None, data: str | None = None) -> list:

@@ -51,7 +51,8 @@ RECIPES = {
 }
 
 FAMILY = Family(
-    name="yolo_rd", config_class=YoloRDConfig, variants=VARIANTS, benchmark="rd-synthetic", loss=loss,
+    # the benchmark's version named: records and search journals say which maps they were made on
+    name="yolo_rd", config_class=YoloRDConfig, variants=VARIANTS, benchmark="rd-synthetic:v2", loss=loss,
     head_classes=head_classes, metric=RD_COCO_PROTOCOL, modality="rd",
     schedules={"quick": "yolo_quick", "paper": "yolo_paper"}, weight_ema=True, recipes=RECIPES,
 )

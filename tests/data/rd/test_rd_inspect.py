@@ -74,5 +74,7 @@ def test_synthetic_command_writes_a_cache_that_reads_back(tmp_path, capsys):
     cached = RDCachedDataset(tmp_path / "c", RDSyntheticConfig(), "val", 0)
     assert len(cached) == 2
     np.testing.assert_array_equal(cached[1].power, generate_sample(RDSyntheticConfig(), "val", 1).power)
-    synthetic_main(["--split", "val", "--samples", "1", "--bench", "0", "--cache", str(tmp_path / "v1")])  # plain: v1
+    synthetic_main(["--split", "val", "--samples", "1", "--bench", "0", "--benchmark", "1", "--cache", str(tmp_path / "v1")])
     assert RDCachedDataset(tmp_path / "v1", benchmark_config(1), "val", 0)[0].meta["index"] == 0
+    synthetic_main(["--split", "val", "--samples", "1", "--bench", "0", "--cache", str(tmp_path / "plain")])  # plain: v2
+    assert RDCachedDataset(tmp_path / "plain", RDSyntheticConfig(), "val", 0)[0].meta["index"] == 0

@@ -77,10 +77,24 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys, uncompiled_init):
     assert manifest["ship_command"].startswith("dsfec ship --model yolov8n")
     for split in ("val", "test"):
         measured = manifest["measured"][split]
-        assert measured["protocol"] == "rd_coco" and measured["data"] == "rd-synthetic" and measured["frames"] == 2
+        assert measured["protocol"] == "rd_coco" and measured["data"] == "rd-synthetic:v2" and measured["frames"] == 2
         assert {"mAP50", "mAP50_95", "darod_mAP50"} <= set(measured)
     assert manifest["measured"]["test"]["mAP50"] == result["mAP50"]  # test split, data seed 0: what eval scored
     assert type(api.load("yolov8n", weights=shipped / "yolov8n.msgpack")).__name__ == "RDPredictor"
+
+    # the average's gain: raw and averaged weights of the last checkpoint, the average's scores the shipped ones
+    from experiments import ema_gain
+
+    assert ema_gain.main(["--run-dir", str(run), "--frames", "2", "--record", str(tmp_path / "ema.json")]) == 0
+    gain = json.loads((tmp_path / "ema.json").read_text())
+    assert gain["checkpoint"]["ema_updates"] == 1 and gain["training"]["model"] == "yolov8n"
+    shipped_test = {k: v for k, v in manifest["measured"]["test"].items() if k != "data"}  # synthetic = rd-synthetic:v2
+    assert {k: gain["measured"]["ema"]["test"][k] for k in shipped_test} == shipped_test
+    assert gain["ema_minus_raw"]["test"]["mAP50"] == round(manifest["measured"]["test"]["mAP50"]
+                                                           - gain["measured"]["raw"]["test"]["mAP50"], 4)
+    one = {"mAP50": 20.0, "frames": 2, "data": "x"}  # after one update the two score alike: the sign on made-up figures
+    made_up = {"raw": {"val": one, "test": one}, "ema": {"val": {**one, "mAP50": 21.5}, "test": one}}
+    assert ema_gain.gains(made_up) == {"val": {"mAP50": 1.5}, "test": {"mAP50": 0.0}}
 
 
 def test_pngs_draw_only_predictions_above_the_min_score(tmp_path, monkeypatch):
@@ -260,3 +274,9 @@ def test_export_quantize_and_onnx_eval_reach_the_rd_deploy_functions(monkeypatch
     assert result["runtime"] == "onnx" and result["weights"] == str(tmp_path / "x") and calls["ort"] == 0.001
     with pytest.raises(SystemExit, match="holds 'yolov8s', not --model 'yolov8n'"):
         cli.main(["eval", "--model", "yolov8n", "--runtime", "onnx", "--onnx", str(tmp_path / "other"), "--frames", "1"])
+
+
+def test_every_synthetic_benchmark_version_trains_on_the_generated_default():
+    for data in ("synthetic", "rd-synthetic", "synthetic:v1", "synthetic:v2"):
+        assert cli_rd.default_train_samples(data) == cli_rd.TRAIN_SAMPLES, data
+    assert cli_rd.default_train_samples("raddet:/data/raddet") is None  # a real source: its whole split

@@ -16,9 +16,10 @@ Sources and assumptions (reference-spec §4; ../shared/docs/rd-yolo-camera-facts
   map over the chain's noise gain, ~6.5 counts in both files). The radar equation gives each
   scatterer's SNR against kT B NF (FMCWSensor.noise_power_dbm); counts = noise_counts_rms *
   sqrt(SNR), so maps sit on the same log10 scale as a real TI capture.
-- Benchmark versions (issue 54): v1 is the benchmark before the realism below (the shipped RD
-  weights and their records were made on it; `benchmark_config(1)` regenerates its samples
-  exactly, and it is what a plain `synthetic` gives until they are retrained); v2 adds static clutter at every range, the IF chain's shape and the
+- Benchmark versions (issue 54): v1 is the benchmark before the realism below (the first RD
+  weights and the records made before issue 54 were made on it; `benchmark_config(1)`, or
+  `synthetic:v1`, regenerates its samples exactly); v2, what a plain `synthetic` gives and what
+  the shipped RD weights are trained on, adds static clutter at every range, the IF chain's shape and the
   Tx->Rx coupling, each measured against the TI capture through the same chain (the capture is
   an indoor scene of another radar, so the mechanisms are matched, not the room):
   * IFChain (if_chain.py): high-pass corner, its noise share, low-pass corner, order and stop
@@ -44,10 +45,10 @@ from ..sensor import RADDET_SENSOR, FMCWSensor
 from .if_chain import NO_IF_CHAIN, IFChain
 
 FORMAT_VERSION = 2  # bump when generated samples change for the same (config, split, index, seed)
-BENCHMARK_VERSIONS = (1, 2)  # 1: the benchmark the shipped RD weights were trained on; 2: issue 54's realism
+BENCHMARK_VERSIONS = (1, 2)  # 1: the benchmark before issue 54 (its records); 2: issue 54's realism
 # What `synthetic` without a version means: the shipped RD weights' benchmark, so that their recorded
-# figures reproduce with the plain commands, until they are retrained on version 2
-DEFAULT_BENCHMARK = 1
+# figures reproduce with the plain commands (the RD family's `benchmark` names it explicitly)
+DEFAULT_BENCHMARK = 2
 MICRO_MOTIONS = ("none", "gait", "wheels")
 
 # Vehicle aspect pattern g(b) = B cos b + C cos 2b through 3GPP's front (b = 0) 15.5, rear 14.6 and
@@ -191,7 +192,7 @@ class RDSyntheticConfig:
 def benchmark_config(version: int = DEFAULT_BENCHMARK) -> RDSyntheticConfig:
     """The benchmark's config by version: 2 is RDSyntheticConfig's defaults; 1 has no area clutter, no point
     reflectors, a flat IF chain and no coupling, and generates exactly the samples it did before
-    issue 54 (what the shipped RD weights and their records were made on)."""
+    issue 54 (what the first RD weights and the records of that time were made on)."""
     if version not in BENCHMARK_VERSIONS:
         raise ValueError(f"RD synthetic benchmark version {version!r}; known: {BENCHMARK_VERSIONS}")
     cfg = RDSyntheticConfig()

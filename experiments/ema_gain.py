@@ -1,0 +1,110 @@
+"""The weight average's gain at the same budget, for a training run of the YOLO families.
+
+One run trained with the EMA (train/ema.py) holds, in each checkpoint, both its raw weights and
+their average. The average never feeds back into training, so the raw weights are what the same
+command with `--no-ema` trains, step for step. Both are scored here by the manifest's protocol
+(`dsfec ship`'s measure_benchmark) on the same val and test maps of the run's own benchmark, and
+the record keeps the figures, the average's decay at that step, and how the run was trained.
+
+    python -m experiments.ema_gain --run-dir runs/ship/yolov8n --frames 200 \\
+        --record experiments/records/ema/yolov8n.json
+"""
+
+from __future__ import annotations
+
+if __name__ == "__main__":  # a command that runs XLA: its process settings before anything loads JAX
+    from dsfec_jax.core.host_memory import prepare_xla_process
+
+    prepare_xla_process()  # may restart this command (core/host_memory.py)
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+SPLITS = ("val", "test")
+
+
+def parse(argv=None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m experiments.ema_gain", description=__doc__.split("\n\n")[0])
+    p.add_argument("--run-dir", required=True, help="a range-Doppler run trained with the weight EMA")
+    p.add_argument("--checkpoint", choices=("best", "last"), default="last",
+                   help="last: the run's final step (the budget); best: the step its validation chose")
+    p.add_argument("--frames", type=int, default=200, help="maps of each split to score")
+    p.add_argument("--record", default=None, help="write the record (JSON) here")
+    return p.parse_args(argv)
+
+
+def checkpoint_of(run: Path, which: str) -> Path:
+    from dsfec_jax.core.run_checkpoints import best_step, last_steps
+
+    found = best_step(run) if which == "best" else (last_steps(run) or [None])[-1]
+    if found is None:
+        sys.exit(f"experiments.ema_gain: {run / 'checkpoints'} holds no {which} checkpoint")
+    return found
+
+
+def weights(state: dict, collections) -> dict[str, dict]:
+    """{'raw': the trained weights, 'ema': their average}: each the model's collections."""
+    from dsfec_jax.core.averaged_weights import EMA_KEY
+
+    if not isinstance(state.get(EMA_KEY), dict):
+        sys.exit("experiments.ema_gain: the checkpoint keeps no weight average (trained with --no-ema?)")
+    return {"raw": {k: state[k] for k in collections}, "ema": {k: state[EMA_KEY][k] for k in collections}}
+
+
+def scores(run: Path, path: Path, info: dict, frames: int) -> dict:
+    from dsfec_jax import zoo
+    from dsfec_jax.cli import measure_benchmark
+    from dsfec_jax.core.run_checkpoints import read_state
+    from dsfec_jax.modalities.registry import modality_of
+
+    if info.get("precise_bn_images"):  # the camera fits: only the average's statistics were re-estimated
+        sys.exit(f"experiments.ema_gain: {run} re-estimated the average's BatchNorm statistics (precise BN) "
+                 "and not the raw weights': their scores would not compare like for like")
+    cfg = zoo.config(info["model"], **info.get("overrides", {}))
+    family = zoo.family_of(cfg)
+    predictor, _ = modality_of(cfg).commands.ship_predictor(cfg, path, info)  # the run's evaluation settings
+    out = {}
+    for name, variables in weights(read_state(path), zoo.Detector(cfg).collections).items():
+        predictor.variables = variables
+        out[name] = {split: measure_benchmark(predictor, family, split, frames, info["data"]["source"])
+                     for split in SPLITS}
+    return out
+
+
+def gains(measured: dict) -> dict:
+    """EMA minus raw, per split and figure."""
+    raw, ema = measured["raw"], measured["ema"]
+    return {split: {k: round(ema[split][k] - v, 4) for k, v in raw[split].items() if isinstance(v, float)}
+            for split in SPLITS}
+
+
+def main(argv=None) -> int:
+    import numpy as np
+
+    from dsfec_jax.core import atomic
+    from dsfec_jax.core.provenance import versions
+    from dsfec_jax.core.run_checkpoints import read_extra, read_state
+    from dsfec_jax.train.ema import decay
+
+    args = parse(argv)
+    run = Path(args.run_dir)
+    info = json.loads((run / "run.json").read_text())
+    path = checkpoint_of(run, args.checkpoint)
+    updates = int(read_state(path)["ema"]["updates"])
+    measured = scores(run, path, info, args.frames)
+    record = {"command": "python -m experiments.ema_gain " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:])),
+              "seed": info.get("seed"), "versions": versions(), "training": info,
+              "checkpoint": {"path": str(path), "step": read_extra(path).get("step"), "ema_updates": updates,
+                             "decay": round(float(np.asarray(decay(updates))), 4)},
+              "measured": measured, "ema_minus_raw": gains(measured)}
+    if args.record:
+        atomic.write_json(args.record, record)
+    print(json.dumps({k: record[k] for k in ("checkpoint", "ema_minus_raw")}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
