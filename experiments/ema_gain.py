@@ -1,12 +1,14 @@
-"""The weight average's gain at the same budget, for a training run of the YOLO families.
+"""The weight average's gain at the same budget, for a training run of the YOLO or camera families.
 
 One run trained with the EMA (train/ema.py) holds, in each checkpoint, both its raw weights and
 their average. The average never feeds back into training, so the raw weights are what the same
 command with `--no-ema` trains, step for step. Both are scored here by the manifest's protocol
-(`dsfec ship`'s measure_benchmark) on the same val and test maps of the run's own benchmark, and
-the record keeps the figures, the average's decay at that step, and how the run was trained.
+(`dsfec ship`'s measure_benchmark) on the same val and test items of the run's own benchmark, and
+the record keeps the figures, the average's decay at that step, and how the run was trained. A
+camera run validates after re-estimating the average's BatchNorm statistics (precise BN); both
+weight sets get that here, on the same training images.
 
-    python -m experiments.ema_gain --run-dir runs/ship/yolov8n --frames 200 \\
+    python -m experiments.ema_gain --run-dir runs/ship_v2/yolov8n --frames 200 \\
         --record experiments/records/ema/yolov8n.json
 """
 
@@ -45,13 +47,31 @@ def checkpoint_of(run: Path, which: str) -> Path:
     return found
 
 
-def weights(state: dict, collections) -> dict[str, dict]:
-    """{'raw': the trained weights, 'ema': their average}: each the model's collections."""
+def weights(state: dict, collections, recalibrate=None) -> dict[str, dict]:
+    """{'raw': the trained weights, 'ema': their average}: each the model's collections, each with
+    its BatchNorm statistics re-estimated by `recalibrate` (the run's precise BN) where given."""
     from dsfec_jax.core.averaged_weights import EMA_KEY
+    from dsfec_jax.train.ema import evaluated
 
     if not isinstance(state.get(EMA_KEY), dict):
         sys.exit("experiments.ema_gain: the checkpoint keeps no weight average (trained with --no-ema?)")
-    return {"raw": {k: state[k] for k in collections}, "ema": {k: state[EMA_KEY][k] for k in collections}}
+    raw = {k: v for k, v in state.items() if k != EMA_KEY}
+    recalibrate = recalibrate or (lambda s: s)
+    return {name: {**{k: s[k] for k in collections}, **evaluated(recalibrate(s))}
+            for name, s in (("raw", raw), ("ema", state))}
+
+
+def precise_bn_of(run: Path, info: dict, det):
+    """The run's own BN re-estimation before each validation (the camera fits' precise BN, on the
+    same training images), or None for a run without it."""
+    if not info.get("precise_bn_images"):
+        return None
+    from dsfec_jax.data.camera.sources import load_camera_images
+    from dsfec_jax.modalities.image.fit import bn_recalibration
+
+    images = load_camera_images(info["data"]["source"], "train", info["train_images"], seed=info["seed"])
+    return bn_recalibration(det, images, info["schedule"]["batch_size"], info["seed"], info["eval_size"],
+                            info["precise_bn_images"], info["max_boxes"], info["aspect"])
 
 
 def scores(run: Path, path: Path, info: dict, frames: int) -> dict:
@@ -60,14 +80,12 @@ def scores(run: Path, path: Path, info: dict, frames: int) -> dict:
     from dsfec_jax.core.run_checkpoints import read_state
     from dsfec_jax.modalities.registry import modality_of
 
-    if info.get("precise_bn_images"):  # the camera fits: only the average's statistics were re-estimated
-        sys.exit(f"experiments.ema_gain: {run} re-estimated the average's BatchNorm statistics (precise BN) "
-                 "and not the raw weights': their scores would not compare like for like")
     cfg = zoo.config(info["model"], **info.get("overrides", {}))
-    family = zoo.family_of(cfg)
+    family, det = zoo.family_of(cfg), zoo.Detector(cfg)
     predictor, _ = modality_of(cfg).commands.ship_predictor(cfg, path, info)  # the run's evaluation settings
     out = {}
-    for name, variables in weights(read_state(path), zoo.Detector(cfg).collections).items():
+    # a run that re-estimated BN before validating did so for the average only: both are re-estimated here
+    for name, variables in weights(read_state(path), det.collections, precise_bn_of(run, info, det)).items():
         predictor.variables = variables
         out[name] = {split: measure_benchmark(predictor, family, split, frames, info["data"]["source"])
                      for split in SPLITS}

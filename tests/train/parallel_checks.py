@@ -178,6 +178,24 @@ def resume_checks(tmp: Path) -> dict:
             "refused": refused}
 
 
+def per_step_checks() -> dict:
+    """A batch whose rows are split and whose per-step input (a supernet's subnet mask) is whole:
+    where each lands on the mesh, and what a step on it computes against numpy."""
+    import numpy as np
+
+    lay = parallel.layout()
+    rows, mask = np.arange(6, dtype=np.float32).reshape(2, 3), np.array([1.0, 0.0, 2.0], np.float32)
+    placed = lay.batch_on_devices({"inputs": {"x": rows, "masks": {"m": mask}}, "targets": {"t": rows[:, 0]},
+                                   parallel.PER_STEP_INPUTS: ("masks",)})
+    step = lay.step(lambda state, b: (state + (b["inputs"]["x"] @ b["inputs"]["masks"]["m"]).sum(), state))
+    state = jax.device_put(np.float32(1.0), lay.replicated)
+    got, _ = step(state, {"inputs": placed["inputs"], "targets": placed["targets"]})
+    return {"rows_sharded": placed["inputs"]["x"].sharding.spec == lay.batch_sharding.spec,
+            "mask_replicated": placed["inputs"]["masks"]["m"].sharding.is_fully_replicated,
+            "mask_shape": list(placed["inputs"]["masks"]["m"].shape),
+            "step": float(got), "numpy": float(1.0 + (rows @ mask).sum())}
+
+
 def devices_mode(result: Path) -> None:
     parallel.start(parallel.Launch(devices=2))
     t0 = time.perf_counter()
@@ -186,6 +204,7 @@ def devices_mode(result: Path) -> None:
         out[family] = compare_steps(family)
         print(f"{family}: {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     out["resume"] = resume_checks(result.parent)
+    out["per_step"] = per_step_checks()
     out["seconds"] = time.perf_counter() - t0
     result.write_text(json.dumps(out))
 

@@ -61,6 +61,12 @@ def test_a_sharded_run_resumes_exactly_and_on_another_device_count(two_devices):
     assert got["resume_parallel"]["devices"] == 1
 
 
+def test_per_step_inputs_are_whole_on_every_device_and_rows_split(two_devices):
+    got = two_devices["per_step"]
+    assert got["rows_sharded"] and got["mask_replicated"] and got["mask_shape"] == [3]
+    assert got["step"] == got["numpy"]
+
+
 def test_a_batch_that_does_not_divide_is_refused_by_name(two_devices):
     message = two_devices["resume"]["refused"]
     assert "--batch-size 3" in message and "2 devices" in message, message

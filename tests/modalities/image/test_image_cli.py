@@ -77,6 +77,15 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys, uncompiled_init):
                      "--frames", "2", "--size", "64", "--json", *TINY]) == 0  # classes from the shipped manifest
     assert last_json(capsys)["mAP50"] == measured["test"]["mAP50"]
 
+    # the average's gain: both weight sets get the run's precise BN, and the average scores as shipped
+    from experiments import ema_gain
+
+    assert ema_gain.main(["--run-dir", str(run), "--frames", "2", "--record", str(tmp_path / "ema.json")]) == 0
+    gain = json.loads((tmp_path / "ema.json").read_text())
+    assert gain["checkpoint"]["ema_updates"] == 2
+    figures = [(split, key) for split in ("val", "test") for key in ("mAP50", "coco_mAP50_95")]
+    assert [gain["measured"]["ema"][s][k] for s, k in figures] == [measured[s][k] for s, k in figures]
+
 
 @pytest.mark.parametrize("argv,message", [
     (["export", "--model", "yolov3_darknet53", "--out", "x"], "pass --weights"),  # Darknet53 ships no weights

@@ -97,6 +97,20 @@ def test_train_eval_predict_ship_round_trip(tmp_path, capsys, uncompiled_init):
     assert ema_gain.gains(made_up) == {"val": {"mAP50": 1.5}, "test": {"mAP50": 0.0}}
 
 
+def test_the_ema_gain_re_estimates_both_weight_sets_where_the_run_did():
+    """A camera run's precise BN re-estimated the average's statistics only: the gain re-estimates
+    the raw weights' too (a stand-in re-estimation: statistic = 10 x the weight it sees)."""
+    from experiments import ema_gain
+    from dsfec_jax.train.ema import evaluated, with_evaluated_batch_stats
+
+    state = {"params": {"w": 1.0}, "batch_stats": {"m": 0.0}, "step": 3,
+             "ema": {"params": {"w": 2.0}, "batch_stats": {"m": 0.0}, "updates": 1}}
+    recalibrate = lambda s: with_evaluated_batch_stats(s, {"m": 10 * evaluated(s)["params"]["w"]})
+    assert ema_gain.weights(state, ("params", "batch_stats"), recalibrate) == {
+        "raw": {"params": {"w": 1.0}, "batch_stats": {"m": 10.0}}, "ema": {"params": {"w": 2.0}, "batch_stats": {"m": 20.0}}}
+    assert ema_gain.weights(state, ("params", "batch_stats"))["raw"]["batch_stats"] == {"m": 0.0}  # none: as trained
+
+
 def test_pngs_draw_only_predictions_above_the_min_score(tmp_path, monkeypatch):
     from argparse import Namespace
 
