@@ -50,7 +50,7 @@ from pathlib import Path
 from dsfec_jax.core import atomic
 from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.models.yolo_rd import paper
-from dsfec_jax.models.yolo_rd.config import SHIPPED_SMALL_SIDE
+from dsfec_jax.models.yolo_rd.config import EARLIER_SMALL_SIDE
 from dsfec_jax.models.yolo_rd.variants import (TABLE5_ROWS, TABLE6_OPTIONS, VARIANTS, fusion_variant,
                                                representation_variant)
 from dsfec_jax.metrics.boxes2d.coco import COCO_IOU_THRESHOLDS
@@ -74,7 +74,7 @@ def overrides_of(cfg) -> dict:
             if f.name not in UNCOMPARED and getattr(cfg, f.name) != getattr(base, f.name)}
 
 
-def row_overrides(cfg, small_side=SHIPPED_SMALL_SIDE) -> dict:
+def row_overrides(cfg, small_side=EARLIER_SMALL_SIDE) -> dict:
     """A row's trial overrides: `cfg`'s overrides of the base, the small-box rule always pinned."""
     return {**overrides_of(cfg), "assign_small_side": tuple(float(v) for v in small_side)}
 
@@ -163,7 +163,7 @@ def _delta(label: str, mean, first, sig: dict | None) -> str:
     return f"{mean - first:+.1f} [{lo:+.1f}, {hi:+.1f}]" + (" above noise" if lo > 0 or hi < 0 else " within noise")
 
 
-def markdown(table: str, records: list[dict], small_side=SHIPPED_SMALL_SIDE) -> str:
+def markdown(table: str, records: list[dict], small_side=EARLIER_SMALL_SIDE) -> str:
     """The table: per row ours (mean ± sd over seeds) beside the paper's, and the headline's change
     from the first row with its 95 % paired-bootstrap interval over validation samples (and seeds);
     the rows trained with the small-box rule `small_side`."""
@@ -198,7 +198,7 @@ def markdown(table: str, records: list[dict], small_side=SHIPPED_SMALL_SIDE) -> 
     return "\n".join(lines) + "\n\n" + note + "\n"
 
 
-def table_record(table: str, records: list[dict], command: str, profile: str, small_side=SHIPPED_SMALL_SIDE) -> dict:
+def table_record(table: str, records: list[dict], command: str, profile: str, small_side=EARLIER_SMALL_SIDE) -> dict:
     """The shipped record of one table: each row's trials (seeds, figures, costs, time, versions),
     the bootstrap verdicts and the markdown, so docs/range-doppler.md's figures are traceable without runs/."""
     rows = table_rows(table)
@@ -226,7 +226,7 @@ def main(argv=None) -> int:
     table, rest = argv[0], argv[1:]
     rows = table_rows(table)
     p = parser(f"python -m experiments.yolo_rd_tables {table}", __doc__, base=BASE)
-    p.add_argument("--small-side", type=small_side_arg, default=SHIPPED_SMALL_SIDE, metavar="BELOW,WIDENED_TO",
+    p.add_argument("--small-side", type=small_side_arg, default=EARLIER_SMALL_SIDE, metavar="BELOW,WIDENED_TO",
                    help="the assigner's small-box rule every row trains with (default 8,16: the README's tables; "
                         "16,16: ultralytics 8.4.190's)")
     p.add_argument("--record", default=DEFAULT_RECORD_DIR,

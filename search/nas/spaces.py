@@ -15,7 +15,7 @@
 from __future__ import annotations
 
 from dsfec_jax import zoo
-from dsfec_jax.models.yolo_rd.config import SHIPPED_SMALL_SIDE, scaled_width
+from dsfec_jax.models.yolo_rd.config import EARLIER_SMALL_SIDE, scaled_width
 
 from .engines import POINT_ENGINE, RD_ENGINE
 from .space import Choice, SearchSpace
@@ -29,7 +29,7 @@ FUSIONS = (1, 2, 3)
 # subnets): docs/search.md's NAS figures were measured with the family's pre-issue-49 default (8, 16),
 # so the space pins it, and a registered subnet records it; ultralytics 8.4.190's (16, 16) is the
 # family's default for everything else (models/yolo_rd/config.py).
-YOLO_RD_SEARCH_SMALL_SIDE = SHIPPED_SMALL_SIDE
+YOLO_RD_SEARCH_SMALL_SIDE = EARLIER_SMALL_SIDE
 
 
 def yolov8n_adapter_space(base: str = "yolov8n_adapter") -> SearchSpace:

@@ -73,10 +73,11 @@ ARCHS: dict[str, tuple[tuple[str, ...], int]] = {
 
 
 # The assigner's small-box rule (below, widened_to): ultralytics 8.4.190's (every GT side under
-# 16 px widened to 16 px), and the one the shipped weights and docs/range-doppler.md's tables were trained
-# with before issue 49 (only sides under 8 px widened), kept so that their commands reproduce them.
+# 16 px widened to 16 px), and the earlier one (only sides under 8 px widened) that the first shipped
+# weights, docs/range-doppler.md's v1 tables and the NAS records were trained with before issue 49,
+# kept so that their commands reproduce them.
 REFERENCE_SMALL_SIDE = (16.0, 16.0)
-SHIPPED_SMALL_SIDE = (8.0, 16.0)
+EARLIER_SMALL_SIDE = (8.0, 16.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,8 +101,8 @@ class YoloRDConfig:
     # the anchor-inside test, as ultralytics 8.4.190's TaskAlignedAssigner does (stride_val = stride[1]
     # = 16). On the synthetic RD benchmark at 256x64, half of the GTs (Doppler extent: median 4 px)
     # hold no stride-8 anchor centre and would never be learned without it (measured: 63 of 126 in one
-    # batch of 64). The shipped RD weights and docs/range-doppler.md's tables were trained with
-    # SHIPPED_SMALL_SIDE (their records pin it). None: the YOLOv8-era rule (no widening).
+    # batch of 64). The v1 tables of docs/range-doppler.md and the NAS records were trained with
+    # EARLIER_SMALL_SIDE (their records pin it). None: the YOLOv8-era rule (no widening).
     assign_small_side: tuple[float, float] | None = REFERENCE_SMALL_SIDE
     backbone_width_ratios: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0, 1.0)  # elastic widths (module docstring)
     neck_width_ratios: tuple[float, ...] = (1.0, 1.0, 1.0)
