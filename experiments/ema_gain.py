@@ -74,10 +74,9 @@ def precise_bn_of(run: Path, info: dict, det):
                             info["precise_bn_images"], info["max_boxes"], info["aspect"])
 
 
-def scores(run: Path, path: Path, info: dict, frames: int) -> dict:
+def scores(run: Path, path: Path, state: dict, info: dict, frames: int) -> dict:
     from dsfec_jax import zoo
     from dsfec_jax.cli import measure_benchmark
-    from dsfec_jax.core.run_checkpoints import read_state
     from dsfec_jax.modalities.registry import modality_of
 
     cfg = zoo.config(info["model"], **info.get("overrides", {}))
@@ -85,7 +84,7 @@ def scores(run: Path, path: Path, info: dict, frames: int) -> dict:
     predictor, _ = modality_of(cfg).commands.ship_predictor(cfg, path, info)  # the run's evaluation settings
     out = {}
     # a run that re-estimated BN before validating did so for the average only: both are re-estimated here
-    for name, variables in weights(read_state(path), det.collections, precise_bn_of(run, info, det)).items():
+    for name, variables in weights(state, det.collections, precise_bn_of(run, info, det)).items():
         predictor.variables = variables
         out[name] = {split: measure_benchmark(predictor, family, split, frames, info["data"]["source"])
                      for split in SPLITS}
@@ -111,8 +110,9 @@ def main(argv=None) -> int:
     run = Path(args.run_dir)
     info = json.loads((run / "run.json").read_text())
     path = checkpoint_of(run, args.checkpoint)
-    updates = int(read_state(path)["ema"]["updates"])
-    measured = scores(run, path, info, args.frames)
+    state = read_state(path)  # read once: the updates count and both weight sets
+    updates = int(state["ema"]["updates"])
+    measured = scores(run, path, state, info, args.frames)
     record = {"command": "python -m experiments.ema_gain " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:])),
               "seed": info.get("seed"), "versions": versions(), "training": info,
               "checkpoint": {"path": str(path), "step": read_extra(path).get("step"), "ema_updates": updates,
