@@ -4,11 +4,13 @@ median ms of each and the median ratio A / B with its p10-p90 spread over the ro
 
 `--ab fold` (A: the trained network, BNs kept; B: BNs folded, every conv XLA's);
 `--ab products` (A: the export's form, every conv XLA's; B: the runtime's, the small wide convs as
-one matrix product, layers/conv_product.py); `--grid` times single 3x3 convs both ways over image
+one matrix product, layers/conv_product.py); `--ab blocks` (A: the runtime's form with each strided
+conv of a thin input XLA's; B: as it ships, over blocks of pixels, layers/conv_space_to_depth.py); `--grid` times single 3x3 convs both ways over image
 sizes and widths (where conv_product's MAX_PIXELS and MIN_CHANNELS come from).
 
     python -m experiments.bn_fold_speed --models yolov8n,dsfec_s,shuffle_yolov3 --rounds 200
     python -m experiments.bn_fold_speed --ab products --models yolov3_darknet53,yolov8n --rounds 30
+    python -m experiments.bn_fold_speed --ab blocks --models yolov8n,yolov8n_adapter,shuffle_yolov3 --rounds 40
     python -m experiments.bn_fold_speed --grid --rounds 15
 """
 
@@ -31,11 +33,30 @@ def forward_pair(name: str, hw, ab: str = "fold"):
 
     det = zoo.create(name)
     variables = jax.device_put(det.init(jax.random.key(0)))
+    inputs = jax.device_put(det.config.dummy_inputs(1, hw=hw) if hw else det.dummy_inputs(1))
+    if ab == "blocks":
+        return _blocks_pair(zoo.deploy(det, variables), inputs)
     convs = zoo.deploy(det, variables, for_export=True)  # folded, every conv XLA's
     first, second = ((det, variables), convs) if ab == "fold" else (convs, zoo.deploy(det, variables))
-    inputs = det.config.dummy_inputs(1, hw=hw) if hw else det.dummy_inputs(1)
-    inputs = jax.device_put(inputs)
     return tuple(_run(d.apply, jax.device_put(v), inputs) for d, v in (first, second))
+
+
+def _blocks_pair(runtime, inputs):
+    """(the runtime form with every thin strided conv XLA's, the runtime form as it ships): each
+    traced under its own setting of layers/conv_space_to_depth.py's THIN_INPUT."""
+    import jax
+
+    from dsfec_jax.layers import conv_space_to_depth
+
+    detector, variables = runtime
+    shipped, pair = conv_space_to_depth.THIN_INPUT, []
+    for thin in (0, shipped):
+        conv_space_to_depth.THIN_INPUT = thin
+        run = _run(lambda v, x: detector.apply(v, x), jax.device_put(variables), inputs)  # its own jit cache
+        run()  # compiled now, under this setting
+        pair.append(run)
+    conv_space_to_depth.THIN_INPUT = shipped
+    return tuple(pair)
 
 
 def _run(fn, *args):
@@ -90,7 +111,7 @@ def main(argv=None) -> int:
     p.add_argument("--rounds", type=int, default=100)
     p.add_argument("--per-round", type=int, default=3, help="forwards per timing (their mean)")
     p.add_argument("--threads", type=int, default=1)
-    p.add_argument("--ab", choices=("fold", "products"), default="fold")
+    p.add_argument("--ab", choices=("fold", "products", "blocks"), default="fold")
     p.add_argument("--grid", action="store_true", help="single 3x3 convs, XLA's against the product form")
     args = p.parse_args(argv)
     from dsfec_jax.core import threads
@@ -102,7 +123,7 @@ def main(argv=None) -> int:
                 r = interleaved(*conv_pair(hw, channels), args.rounds, args.per_round)
                 print(_line(f"3x3 conv {hw[0]}x{hw[1]} px, {channels}->{2 * channels}", r, "xla", "product"), flush=True)
         return 0
-    names = ("kept", "folded") if args.ab == "fold" else ("convs", "products")
+    names = {"fold": ("kept", "folded"), "products": ("convs", "products"), "blocks": ("xla_stem", "blocks")}[args.ab]
     for name in args.models.split(","):
         r = interleaved(*forward_pair(name, HW.get(name), args.ab), args.rounds, args.per_round)
         print(_line(name, r, *names), flush=True)

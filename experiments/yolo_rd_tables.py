@@ -2,7 +2,7 @@
 
     python -m experiments.yolo_rd_tables table3|table4|table5|table6 [--profile quick|paper|smoke]
                                          [--seeds 2] [--out RUN_DIR] [--backend ray]
-                                         [--record DIR]
+                                         [--record DIR] [--rows LABEL,LABEL]
 
 Table 3: YOLOv8 n/s/m/l and YOLOv8n-Adapter; Table 4: the Adapter on YOLOv8n, YOLOv9t, YOLOv10n;
 Table 5: input representations (backbone heat/gray x adapter none/gray/heat); Table 6: fusion
@@ -168,12 +168,8 @@ def markdown(table: str, records: list[dict], small_side=EARLIER_SMALL_SIDE) -> 
     from the first row with its 95 % paired-bootstrap interval over validation samples (and seeds);
     the rows trained with the small-box rule `small_side`."""
     rows = table_rows(table)
-    by_key = {}
-    for r in records:
-        by_key.setdefault(_row_key(r["overrides"]), []).append(r)
     headline = COLUMNS[table][-1][0]
-    found = [[r for r in by_key.get(_row_key(row_overrides(cfg, small_side)), []) if r["status"] == "ok"]
-             for _, cfg, _ in rows]
+    found = [[r for r in recs if r["status"] == "ok"] for recs in row_records(table, records, small_side)]
     sig = _bootstrap(table, rows, found)
     first = _stats(found[0], headline)[0] if found else None
     extra = [k for k in ("backbone", "adapter", "fusion") if k in rows[0][2]]
@@ -202,10 +198,7 @@ def table_record(table: str, records: list[dict], command: str, profile: str, sm
     """The shipped record of one table: each row's trials (seeds, figures, costs, time, versions),
     the bootstrap verdicts and the markdown, so docs/range-doppler.md's figures are traceable without runs/."""
     rows = table_rows(table)
-    by_key = {}
-    for r in records:
-        by_key.setdefault(_row_key(r["overrides"]), []).append(r)
-    found = [by_key.get(_row_key(row_overrides(cfg, small_side)), []) for _, cfg, _ in rows]
+    found = row_records(table, records, small_side)
     sig = _bootstrap(table, rows, [[r for r in recs if r["status"] == "ok"] for recs in found])
     return {"table": table, "command": command, "profile": profile, "assign_small_side": list(small_side),
             "complete": all(any(r["status"] == "ok" for r in recs) for recs in found),
@@ -213,6 +206,14 @@ def table_record(table: str, records: list[dict], command: str, profile: str, sm
                       "trials": [{k: r[k] for k in TRIAL_FIELDS if k in r} for r in recs]}
                      for (label, cfg, ref), recs in zip(rows, found)],
             "bootstrap": jsonable(sig), "markdown": markdown(table, records, small_side)}
+
+
+def row_records(table: str, records: list[dict], small_side=EARLIER_SMALL_SIDE) -> list[list[dict]]:
+    """Each row's journal records (every seed, failed ones too), in the table's row order."""
+    by_key = {}
+    for r in records:
+        by_key.setdefault(_row_key(r["overrides"]), []).append(r)
+    return [by_key.get(_row_key(row_overrides(cfg, small_side)), []) for _, cfg, _ in table_rows(table)]
 
 
 def _row_key(overrides: dict) -> str:
@@ -231,14 +232,21 @@ def main(argv=None) -> int:
                         "16,16: ultralytics 8.4.190's)")
     p.add_argument("--record", default=DEFAULT_RECORD_DIR,
                    help=f"where the table's shipped record goes (default {DEFAULT_RECORD_DIR})")
+    p.add_argument("--rows", default=None, metavar="LABEL,LABEL",
+                   help="train only these rows (labels as the table prints them; default every row): "
+                        "table3 --rows yolov8n,yolov8n_adapter skips the s/m/l scales")
     args = parse(p, rest)
     args.out = args.out or DEFAULT_OUT
+    wanted = None if args.rows is None else set(args.rows.split(","))
+    unknown = sorted((wanted or set()) - {label for label, _, _ in rows})
+    if unknown:
+        raise SystemExit(f"--rows: no row {unknown} in {table}; its rows: {[label for label, _, _ in rows]}")
 
     def build():
         seen, out = set(), []
         for label, cfg, _ in rows:
             overrides = row_overrides(cfg, args.small_side)
-            if _row_key(overrides) not in seen:
+            if _row_key(overrides) not in seen and (wanted is None or label in wanted):
                 seen.add(_row_key(overrides))
                 out.append({"label": label, "overrides": overrides})
         return out

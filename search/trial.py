@@ -8,11 +8,13 @@ import time
 import traceback
 from pathlib import Path
 
-from dsfec_jax import zoo
+from dsfec_jax import api, zoo
+from dsfec_jax.core import atomic
 from dsfec_jax.core.environment import environment
 from dsfec_jax.core.progress import stage
 from dsfec_jax.profile.records import profile
 from dsfec_jax.core.provenance import jsonable
+from dsfec_jax.core.run_checkpoints import last_steps
 from dsfec_jax.modalities.registry import modality_of
 
 from . import significance
@@ -91,6 +93,32 @@ def rescore(record: dict, run_dir: str | Path) -> dict:
         raise ValueError(f"trial {record['key']}: the {zoo.family_of(record['base']).metric.name} protocol keeps "
                          "no match tables")
     return significance.matches_entry(tables)
+
+
+def held_out(record: dict, run_dir: str | Path, split: str, count: int) -> dict:
+    """A finished trial's final weights (what its headline scored; a run's weight average where it
+    kept one) scored by its family's protocol on `count` samples of `split` of the trial's data ->
+    {"metrics", "matches"}: the protocol's figures and every match class's table, for intervals
+    narrower than the recipe's validation samples allow. Written once to RUN_DIR/held_out/ (a
+    rerun reads it back); ValueError for a trial without finished weights."""
+    cache = Path(run_dir) / "held_out" / f"{record['key']}-{split}-{count}.json"
+    if cache.is_file():
+        return json.loads(cache.read_text())
+    trial_dir = Path(run_dir) / "trials" / record["key"]
+    steps = last_steps(trial_dir) if record.get("status") == "ok" else []
+    if record.get("strategy", "train") != "train" or not steps:
+        raise ValueError(f"trial {record['key']} ({record.get('label')}): no finished weights under {trial_dir} "
+                         "(a failed, unfinished or weight-sharing trial)")
+    recipe = get_recipe(record["recipe"], record["base"])
+    cfg = zoo.config(record["base"], **{**record["overrides"], **recipe.model_overrides()})
+    family = zoo.family_of(cfg)
+    samples = load_data(cfg, record["data"], split, count)
+    scores, tables = modality_of(cfg).protocols[family.metric.name].validate(
+        api.load(cfg, weights=steps[-1]), samples, match_classes(family))
+    out = {"key": record["key"], "split": split, "count": count, "weights": str(steps[-1]),
+           "metrics": jsonable(scores), "matches": significance.matches_entry(tables)}
+    atomic.write_json(cache, out)
+    return out
 
 
 def flat_metrics(scores: dict) -> dict:

@@ -10,9 +10,10 @@ saves, so the conv stays XLA's there. The crossover, and the gain on whole netwo
 with `python -m experiments.bn_fold_speed --grid` and `--ab products` (docs/performance.md).
 
 `product_call(call)` runs a network's apply with every conv that fits (`fits`) computed this way,
-through a flax method interceptor: nothing in the model changes, so training, parameter counts and
-the ONNX export (where the runtime picks its own algorithm) keep the plain convs. It acts on the
-CPU backend only; elsewhere the call runs as it is.
+and every strided conv of a thin input (a stem) over blocks of its pixels
+(layers/conv_space_to_depth.py), through a flax method interceptor: nothing in the model changes,
+so training, parameter counts and the ONNX export (where the runtime picks its own algorithm) keep
+the plain convs. It acts on the CPU backend only; elsewhere the call runs as it is.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from . import conv, yolo
+from . import conv, conv_space_to_depth, yolo
 
 MAX_PIXELS = 512  # output pixels at or below which the product form is used ...
 MIN_CHANNELS = 128  # ... when both the input and the output are at least this wide
@@ -77,9 +78,14 @@ def _intercept(next_fun, args, kwargs, context):
     x = args[0] if args else kwargs["x_BxHxWxC"]
     shape = geometry(module, x)
     kernel = module.get_variable("params", "kernel")
-    if shape is None or kernel is None or not fits(x, kernel, *shape):  # kernel None: being initialised
+    if shape is None or kernel is None:  # a 1x1, or kernel None: being initialised
         return next_fun(*args, **kwargs)
-    y = conv_as_product(x, kernel, *shape)
+    if fits(x, kernel, *shape):
+        y = conv_as_product(x, kernel, *shape)
+    elif conv_space_to_depth.fits(x, kernel, shape[0]):
+        y = conv_space_to_depth.conv_as_space_to_depth(x, kernel, *shape)
+    else:
+        return next_fun(*args, **kwargs)
     return y + module.get_variable("params", "bias") if module.use_bias else y
 
 

@@ -43,3 +43,19 @@ def test_a_changed_headline_is_refused(finished_rd_trial):
         trial.rescore(changed, run_dir)
     with pytest.raises(ValueError, match="keeps no weights of its own"):
         trial.rescore({**changed, "strategy": "oneshot"}, run_dir)
+
+
+def test_held_out_scores_the_final_weights_as_the_trial_did_and_keeps_them(finished_rd_trial):
+    """On the trial's own validation samples the held-out scorer gives the recorded headline and match
+    tables bit for bit (the same weights, the weight average included); on other samples it writes its
+    answer once and reads it back."""
+    run_dir, record = finished_rd_trial
+    recipe = get_recipe(record["recipe"], record["base"])
+    again = trial.held_out(record, run_dir, "val", recipe.val_frames)
+    assert again["metrics"]["mAP50"] == record["metrics"]["mAP50"] and again["matches"] == record["matches"]
+    test = trial.held_out(record, run_dir, "test", 3)
+    cached = run_dir / "held_out" / f"{record['key']}-test-3.json"
+    assert cached.is_file() and trial.held_out(record, run_dir, "test", 3) == test
+    assert test["metrics"]["samples"] == 3 and set(test["matches"]) == set(record["matches"])
+    with pytest.raises(ValueError, match="no finished weights"):
+        trial.held_out({**record, "status": "failed", "key": "0" * 12}, run_dir, "test", 3)

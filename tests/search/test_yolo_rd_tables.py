@@ -98,3 +98,9 @@ def test_the_shipped_record_keeps_every_row_s_trials_and_verdicts_without_match_
     assert out["bootstrap"]["delta"]["yolov8n_adapter"]["ci95"][0] > 0
     assert out["markdown"] == tables.markdown("table6", records) and out["assign_small_side"] == [8.0, 16.0]
     json.dumps(out, allow_nan=False)  # plain JSON: it ships in the repository
+
+
+def test_rows_names_a_subset_and_an_unknown_row_is_refused_by_name(tmp_path):
+    with pytest.raises(SystemExit, match=r"--rows: no row \['yolov8x'\] in table3"):
+        tables.main(["table3", "--rows", "yolov8n,yolov8x", "--out", str(tmp_path)])
+    assert not (tmp_path / "journal.jsonl").exists()  # refused before anything ran
