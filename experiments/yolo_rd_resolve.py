@@ -41,7 +41,7 @@ from dsfec_jax.core.provenance import jsonable
 from dsfec_jax.metrics.resampling import MatchTable, bootstrap_counts
 from dsfec_jax.models.yolo_rd.config import EARLIER_SMALL_SIDE
 from search.journal import Journal
-from search.significance import RESAMPLES, paired_bootstrap
+from search.significance import RESAMPLES, candidate_tables, paired_bootstrap
 from search.trial import held_out
 
 from .yolo_rd_tables import COLUMNS, DEFAULT_OUT, STATISTICS, row_records, small_side_arg, table_rows
@@ -67,20 +67,21 @@ def held_out_records(table: str, records: list[dict], run_dir: Path, maps: int, 
     return out
 
 
+def row_tables(rows: list[tuple], statistic) -> list[list[dict[str, MatchTable]]]:
+    """Each row's match tables as the statistic reads them, one {class: table} per seed."""
+    groups = candidate_tables([r for _, _, recs in rows for r in recs], statistic)
+    return [groups[label] for label, _, _ in rows]
+
+
 def seed_values(rows: list[tuple], statistic) -> list[list[float]]:
     """Each row's statistic on all the held-out maps, one value per seed."""
-    return [[statistic.value(_tables(r, statistic), None) for r in recs] for _, _, recs in rows]
-
-
-def _tables(record: dict, statistic) -> dict[str, MatchTable]:
-    names = statistic.classes if statistic.classes is not None else tuple(record["matches"])
-    return {n: MatchTable.from_text(record["matches"][n], f"trial {record['key']}, class {n}") for n in names}
+    return [[statistic.value(tables, None) for tables in seeds] for seeds in row_tables(rows, statistic)]
 
 
 def maps_sd(rows: list[tuple], statistic, resamples: int, seed: int = 0) -> list[float]:
     """sd of each row's difference from the first row over bootstrap draws of the maps alone (every
     seed kept, its values averaged), the evaluation part of the noise."""
-    tables = [[_tables(r, statistic) for r in recs] for _, _, recs in rows]
+    tables = row_tables(rows, statistic)
     frames = len(next(iter(tables[0][0].values())).samples)
     counts = bootstrap_counts(frames, resamples, seed)
     draws = np.array([[np.mean([statistic.value(t, k) for t in seeds]) for k in counts] for seeds in tables])

@@ -8,8 +8,8 @@ side, so a 3 -> 16 stem runs on XLA's own conv, far below YNNPACK's speed, and g
 Regrouping each stride x stride block of pixels into one pixel of stride^2 x C channels (a
 reshape and transpose of the input) turns the stride-s KxK conv into a stride-1 conv with
 ceil-sized kernel over the blocks, with the same taps in another order (zeros where a block tap
-falls outside the original kernel); its output channels are padded to YNNPACK_MIN_WIDTH + 1
-where both sides are still narrow, and the padding sliced off. Measured per conv and on whole
+falls outside the original kernel); its output channels are padded to PADDED_WIDTH where
+both sides are still narrow, so that YNNPACK takes it, and the padding sliced off. Measured per conv and on whole
 networks with `python -m experiments.conv_gap` and `experiments.bn_fold_speed` (docs/performance.md).
 """
 
