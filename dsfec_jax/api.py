@@ -31,7 +31,9 @@ def load(model, /, weights: str | Path | None = None, predictor_options: dict | 
     else:
         cfg = model
     detector, variables = zoo.trained_detector(cfg, weights)
-    return modality_of(cfg).predictor(detector, variables, **(predictor_options or {}))
+    # a loaded predictor keeps its weights: compiled into the program (modalities/inference.py)
+    options = {"constant_weights": True, **(predictor_options or {})}
+    return modality_of(cfg).predictor(detector, variables, **options)
 
 
 def tune_host() -> dict:

@@ -20,7 +20,8 @@ the first JAX side is the reference (an A/B of flags or settings alone).
 
 train: the project's YOLOv8n train step on its own augmented RD batches (profile/training.py's
 step, the family's quick schedule), and ultralytics' step on the same batches (experiments/peer_torch.py).
-forward: the jitted inference network (weights on the device, `zoo.deploy`'s inference form) and
+forward: the jitted inference network as a deployed predictor runs it (`zoo.deploy`'s inference form,
+the weights compiled in as constants: modalities/inference.py) and
 ultralytics' fused, frozen TorchScript network, on one image of `--hw`. For a model of a family
 with a PyTorch twin (DSFEC's: Baseline, DSFEC-S/M/L; the camera YOLOv3s), the peer is the twin
 with the same weights (experiments/twin_export.py, peer_twins.py), frozen TorchScript, and both
@@ -76,7 +77,8 @@ def jax_train(model: str, batch: int, batches_out: str):
 
 def jax_forward(model: str, hw: tuple[int, int]):
     """fn() running the jitted inference network on one map or image of `hw` (a twinned model:
-    the network its twin mirrors, on the case's input)."""
+    the network its twin mirrors, on the case's input), its weights constants of the program as in
+    a predictor made with constant_weights=True."""
     import jax
     import numpy as np
 
@@ -85,7 +87,8 @@ def jax_forward(model: str, hw: tuple[int, int]):
     if twin_export.family(model):
         twin = twin_export.case(model, hw)
         image = jax.device_put(twin.input)
-        return lambda: jax.block_until_ready(twin.run(twin.variables, image))
+        run = jax.jit(lambda x: twin.run.__wrapped__(twin.variables, x))
+        return lambda: jax.block_until_ready(run(image))
 
     detector = zoo.create(model)
     detector, variables = zoo.deploy(detector, detector.init(jax.random.key(0)))
@@ -93,8 +96,8 @@ def jax_forward(model: str, hw: tuple[int, int]):
     shapes = jax.eval_shape(lambda: detector.dummy_inputs(1))
     rng = np.random.default_rng(0)
     inputs = jax.device_put({k: rng.random((1, *hw, s.shape[-1]), np.float32) for k, s in shapes.items()})
-    net = jax.jit(detector.apply)
-    return lambda: jax.block_until_ready(net(variables, inputs))
+    net = jax.jit(lambda x: detector.apply(variables, x))
+    return lambda: jax.block_until_ready(net(inputs))
 
 
 def jax_worker(args) -> int:

@@ -7,6 +7,8 @@ from typing import Callable
 import jax
 import jax.numpy as jnp
 
+from .silu import silu
+
 LEAKY_SLOPE = 0.1  # the YOLO/Darknet slope; the paper does not state one
 
 
@@ -17,7 +19,7 @@ def _mish(x):
 ACTIVATIONS: dict[str, Callable[[jax.Array], jax.Array]] = {
     "relu": jax.nn.relu,
     "leaky_relu": lambda x: jax.nn.leaky_relu(x, LEAKY_SLOPE),
-    "swish": jax.nn.swish,
+    "swish": silu,  # jax.nn.swish, with a rational logistic in the CPU inference form (layers/silu.py)
     "mish": _mish,
     "hard_swish": jax.nn.hard_swish,
     "gelu": jax.nn.gelu,

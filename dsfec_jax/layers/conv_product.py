@@ -25,10 +25,13 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-from . import conv, conv_space_to_depth, yolo
+from . import conv, conv_space_to_depth, silu, winograd, yolo
 
 MAX_PIXELS = 512  # output pixels at or below which the product form is used ...
 MIN_CHANNELS = 128  # ... when both the input and the output are at least this wide
+WINOGRAD_MIN_WEIGHTS = 32 * 24  # stride-1 3x3 convs with cin * cout from this on run as Winograd's products
+F4_MIN_SIDE = 4  # output rows and columns from which F(4x4, 3x3) beats F(2x2, 3x3) ...
+F4_MAX_WEIGHTS = 1 << 18  # ... while a kernel's cin * cout is at most this (F4 reads 36 copies of it, F2 16)
 
 DENSE = (conv.Conv, yolo.PaddedConv)  # the zoo's dense conv modules; both call their input x_BxHxWxC
 
@@ -58,6 +61,22 @@ def fits(x_BxHxWxC, kernel_KxKxIxO, stride: int, pads) -> bool:
     return ho * wo <= MAX_PIXELS and min(cin, cout) >= MIN_CHANNELS
 
 
+def winograd_form(x_BxHxWxC, kernel_KxKxIxO, stride: int, pads) -> winograd.Minimal | None:
+    """The Winograd transform a stride-1 3x3 conv runs as (None: not one): F(4x4, 3x3) on maps of at
+    least F4_MIN_SIDE outputs a side with kernels of at most F4_MAX_WEIGHTS, else F(2x2, 3x3),
+    whose four 2x2 tiles waste less of a thin map and whose 16 products read a large kernel fewer
+    times (the grid: docs/performance.md). Only for a kernel known while tracing (the weights
+    compiled in as constants: modalities/inference.py), transformed once; with the weights as
+    arguments the transform would run in every call and cost more than it saves."""
+    k, _, cin, cout = kernel_KxKxIxO.shape
+    if isinstance(kernel_KxKxIxO, jax.core.Tracer) or k != 3 or stride != 1:
+        return None
+    if cin * cout < WINOGRAD_MIN_WEIGHTS or min(p for side in pads for p in side) < 0:
+        return None
+    small = min(output_hw(x_BxHxWxC, k, stride, pads)) < F4_MIN_SIDE or cin * cout > F4_MAX_WEIGHTS
+    return winograd.F2 if small else winograd.F4
+
+
 def conv_as_product(x_BxHxWxI, w_KxKxIxO, stride: int, pads):
     """The conv of x padded by `pads` with stride `stride`, as (pixels, K*K*I) @ (K*K*I, O)."""
     b, _, _, cin = x_BxHxWxI.shape
@@ -80,7 +99,10 @@ def _intercept(next_fun, args, kwargs, context):
     kernel = module.get_variable("params", "kernel")
     if shape is None or kernel is None:  # a 1x1, or kernel None: being initialised
         return next_fun(*args, **kwargs)
-    if fits(x, kernel, *shape):
+    form = winograd_form(x, kernel, *shape)
+    if form is not None:
+        y = winograd.conv3x3_transformed(x, winograd.transformed_kernel(kernel, form), shape[1], form)
+    elif fits(x, kernel, *shape):
         y = conv_as_product(x, kernel, *shape)
     elif conv_space_to_depth.fits(x, kernel, shape[0]):
         y = conv_space_to_depth.conv_as_space_to_depth(x, kernel, *shape)
@@ -91,13 +113,14 @@ def _intercept(next_fun, args, kwargs, context):
 
 def product_call(call: Callable) -> Callable:
     """`call` (fn(variables, *args) running a flax network), with the convs that fit computed as
-    one matrix product on the CPU backend. An interceptor outside this one (bn_fold.folded_call)
+    one matrix product on the CPU backend, and its SiLUs' logistic as a rational function there
+    (layers/silu.py). An interceptor outside this one (bn_fold.folded_call)
     still sees each conv's call and adds what it adds after it."""
 
     def run(*args, **kwargs):
         if jax.default_backend() != "cpu":
             return call(*args, **kwargs)
-        with nn.intercept_methods(_intercept):
+        with nn.intercept_methods(_intercept), silu.rational_logistic():
             return call(*args, **kwargs)
 
     return run

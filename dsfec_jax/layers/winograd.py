@@ -1,4 +1,5 @@
-"""Winograd's minimal filtering for stride-1 3x3 convolutions (NHWC, HWIO), the backward pass.
+"""Winograd's minimal filtering for stride-1 3x3 convolutions (NHWC, HWIO): the backward pass of
+training, and the forward of the CPU inference form.
 
 Lavin & Gray, "Fast Algorithms for Convolutional Neural Networks" (CVPR 2016): F(4x4, 3x3)
 computes a 4x4 output tile from a 6x6 input tile with 36 multiplies instead of 144. Over
@@ -13,9 +14,18 @@ re-measure: `python -m dsfec_jax.profile.conv_backward --threads 2`).
 
 float32 error: ~1e-5 of the largest element (the transforms' coefficients reach 8 and 1/24), well
 inside the 1e-4 the gradient-equality tests hold the fast kernels to.
+
+The forward also comes as F(2x2, 3x3) (`F2`: a 2x2 tile from 4x4 inputs, 16 products, coefficients
+0, +-1 and 1/2: float32 error of the order of a direct conv's own rounding, ~1e-6). XLA's CPU conv
+runs 3x3 convs two to three times slower than these products do, so the JAX runtime's inference
+form computes its stride-1 3x3 convs with them (layers/conv_product.py picks F4 or F2 per shape);
+the grid and whole-network timings are in docs/performance.md.
 """
 
+
 from __future__ import annotations
+
+import dataclasses
 
 import jax.numpy as jnp
 import numpy as np
@@ -32,23 +42,65 @@ G = np.array([[1 / 4, 0, 0], [-1 / 6, -1 / 6, -1 / 6], [-1 / 6, 1 / 6, -1 / 6],
 B_T = np.array([[4, 0, -5, 0, 1, 0], [0, -4, -4, 1, 1, 0], [0, 4, -4, -1, 1, 0],
                 [0, -2, -1, 2, 1, 0], [0, 2, -1, -2, 1, 0], [0, 4, 0, -5, 0, 1]], np.float64)
 
+# F(2, 3) in one dimension (interpolation points 0, +-1 and infinity)
+A_T_2 = np.array([[1, 1, 1, 0], [0, 1, -1, -1]], np.float64)
+G_2 = np.array([[1, 0, 0], [1 / 2, 1 / 2, 1 / 2], [1 / 2, -1 / 2, 1 / 2], [0, 0, 1]], np.float64)
+B_T_2 = np.array([[1, 0, -1, 0], [0, 1, 1, 0], [0, -1, 1, 0], [0, 1, 0, -1]], np.float64)
+
 Pads = tuple[tuple[int, int], tuple[int, int]]
 
 
-def conv3x3(x_BxHxWxI, w_3x3xIxO, pads: Pads):
+@dataclasses.dataclass(frozen=True)
+class Minimal:
+    """One F(tile x tile, 3x3): y = A^T [(G w G^T) * (B^T d B)] A over (tile + 2)^2 input tiles.
+    The matrices are looked up by name at call time (a test swaps one to see the result break)."""
+
+    tile: int
+    a_t: str
+    g: str
+    b_t: str
+
+    @property
+    def span(self) -> int:
+        return self.tile + TAPS - 1
+
+    def matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return tuple(globals()[name] for name in (self.a_t, self.g, self.b_t))
+
+
+F4 = Minimal(4, "A_T", "G", "B_T")
+F2 = Minimal(2, "A_T_2", "G_2", "B_T_2")
+
+
+def conv3x3(x_BxHxWxI, w_3x3xIxO, pads: Pads, f: Minimal = F4):
     """The stride-1 3x3 convolution of x padded by `pads` ((top, bottom), (left, right), each >= 0)."""
-    b, h, w, cin = x_BxHxWxI.shape
-    cout = w_3x3xIxO.shape[-1]
+    g = jnp.asarray(f.matrices()[1], x_BxHxWxI.dtype)
+    v = jnp.einsum("ua,abio,vb->uvio", g, w_3x3xIxO, g).reshape(f.span * f.span, *w_3x3xIxO.shape[2:])
+    return conv3x3_transformed(x_BxHxWxI, v, pads, f)
+
+
+def transformed_kernel(w_3x3xIxO, f: Minimal = F4) -> np.ndarray:
+    """G w G^T of a known kernel, in float64 and then the kernel's dtype -> (span^2, I, O): what
+    `conv3x3_transformed` takes (a network whose weights are constants transforms them once)."""
+    g = f.matrices()[1]
+    v = np.einsum("ua,abio,vb->uvio", g, np.asarray(w_3x3xIxO, np.float64), g)
+    return v.reshape(f.span * f.span, *v.shape[2:]).astype(np.asarray(w_3x3xIxO).dtype)
+
+
+def conv3x3_transformed(x_BxHxWxI, v_SxIxO, pads: Pads, f: Minimal = F4):
+    """`conv3x3` of a kernel already transformed (`transformed_kernel`)."""
+    b, h, w, _ = x_BxHxWxI.shape
+    cout = v_SxIxO.shape[-1]
     (top, bottom), (left, right) = pads
     ho, wo = h + top + bottom - TAPS + 1, w + left + right - TAPS + 1
+    a_t = f.matrices()[0]
+    span, tile = f.span, f.tile
     # the output rounded up to whole tiles; the extra rows read zeros and are cropped off
-    u, nh, nw = _input_tiles(x_BxHxWxI, pads, ho, wo)
-    gm = jnp.asarray(G, x_BxHxWxI.dtype)
-    v = jnp.einsum("ua,abio,vb->uvio", gm, w_3x3xIxO, gm).reshape(SPAN * SPAN, cin, cout)
-    m = jnp.einsum("uti,uio->uto", u, v).reshape(SPAN, SPAN, b, nh, nw, cout)
-    rows = _combine([m[i] for i in range(SPAN)], A_T)  # TILE of (SPAN, b, nh, nw, O)
-    tiles = jnp.stack([jnp.stack(_combine([r[j] for j in range(SPAN)], A_T), 3) for r in rows], 2)
-    return tiles.reshape(b, nh * TILE, nw * TILE, cout)[:, :ho, :wo]
+    u, nh, nw = _input_tiles(x_BxHxWxI, pads, ho, wo, f)
+    m = jnp.einsum("uti,uio->uto", u, v_SxIxO).reshape(span, span, b, nh, nw, cout)
+    rows = jnp.stack(_combine([m[i] for i in range(span)], a_t))  # (tile, span, b, nh, nw, O)
+    tiles = jnp.stack(_combine([rows[:, j] for j in range(span)], a_t), -2)  # (tile, b, nh, nw, tile, O)
+    return tiles.transpose(1, 2, 0, 3, 4, 5).reshape(b, nh * tile, nw * tile, cout)[:, :ho, :wo]
 
 
 def conv3x3_input_grad(g_BxHoxWoxO, w_3x3xIxO, pads: Pads):
@@ -67,32 +119,35 @@ def conv3x3_kernel_grad(x_BxHxWxI, g_BxHoxWoxO, pads: Pads):
     u, nh, nw = _input_tiles(x_BxHxWxI, pads, ho, wo)
     # g's padding rows are zeros, so whatever input they meet adds nothing
     gp = jnp.pad(g_BxHoxWoxO, ((0, 0), (0, TILE * nh - ho), (0, TILE * nw - wo), (0, 0)))
-    v = _tiles_2d(gp, A_T.T, TILE, nh, nw).reshape(SPAN * SPAN, -1, cout)
+    v = _tiles_2d(gp, A_T.T, TILE, nh, nw, TILE).reshape(SPAN * SPAN, -1, cout)
     # a long contraction over tiles, both operands row-major (as pointwise_conv's kernel gradient)
     m = jnp.einsum("uti,uto->uio", u, v).reshape(SPAN, SPAN, cin, cout)
     gt = jnp.asarray(G.T, x_BxHxWxI.dtype)
     return jnp.einsum("au,uvio,bv->abio", gt, m, gt)
 
 
-def _input_tiles(x_BxHxWxC, pads: Pads, ho: int, wo: int):
-    """B^T d B of every SPAN x SPAN input tile that an (ho, wo) output, rounded up to whole
-    TILE x TILE tiles, reads from x padded by `pads` -> ((SPAN^2, tiles, C), nh, nw)."""
+def _input_tiles(x_BxHxWxC, pads: Pads, ho: int, wo: int, f: Minimal = F4):
+    """B^T d B of every span x span input tile that an (ho, wo) output, rounded up to whole
+    tile x tile tiles, reads from x padded by `pads` -> ((span^2, tiles, C), nh, nw)."""
     (top, bottom), (left, right) = pads
-    nh, nw = -(-ho // TILE), -(-wo // TILE)
-    xp = jnp.pad(x_BxHxWxC, ((0, 0), (top, bottom + TILE * nh - ho), (left, right + TILE * nw - wo), (0, 0)))
-    return _tiles_2d(xp, B_T, SPAN, nh, nw).reshape(SPAN * SPAN, -1, x_BxHxWxC.shape[-1]), nh, nw
+    tile, span = f.tile, f.span
+    nh, nw = -(-ho // tile), -(-wo // tile)
+    xp = jnp.pad(x_BxHxWxC, ((0, 0), (top, bottom + tile * nh - ho), (left, right + tile * nw - wo), (0, 0)))
+    tiles = _tiles_2d(xp, f.matrices()[2], span, nh, nw, tile)
+    return tiles.reshape(span * span, -1, x_BxHxWxC.shape[-1]), nh, nw
 
 
-def _tiles_2d(a_BxHxWxC, transform: np.ndarray, span: int, nh: int, nw: int):
+def _tiles_2d(a_BxHxWxC, transform: np.ndarray, span: int, nh: int, nw: int, tile: int):
     """`transform` (R x span) applied to every tile's rows and then its columns: tile (p, q)
-    reads rows TILE*p .. TILE*p + span - 1 and the same columns -> (R, R, B, nh, nw, C)."""
-    rows = _combine(_strided(a_BxHxWxC, 1, span, nh), transform)
-    return jnp.stack([jnp.stack(_combine(_strided(r, 2, span, nw), transform)) for r in rows])
+    reads rows tile*p .. tile*p + span - 1 and the same columns -> (R, R, B, nh, nw, C)."""
+    # each pass one stacked array, so that XLA emits it as one fusion rather than one per row
+    rows = jnp.stack(_combine(_strided(a_BxHxWxC, 1, span, nh, tile), transform))  # (R, B, nh, W, C)
+    return jnp.stack(_combine(_strided(rows, 3, span, nw, tile), transform), 1)
 
 
-def _strided(a, axis: int, span: int, tiles: int) -> list:
-    """For k < span: the view of element k of every tile along `axis` (tiles start TILE apart)."""
-    return [lax.slice_in_dim(a, k, k + TILE * (tiles - 1) + 1, TILE, axis) for k in range(span)]
+def _strided(a, axis: int, span: int, tiles: int, tile: int) -> list:
+    """For k < span: the view of element k of every tile along `axis` (tiles start `tile` apart)."""
+    return [lax.slice_in_dim(a, k, k + tile * (tiles - 1) + 1, tile, axis) for k in range(span)]
 
 
 def _combine(parts: list, matrix: np.ndarray) -> list:

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from .conv import DIMS
+from .silu import silu
 
 BN_EPS = 1e-3  # ultralytics initialize_weights
 BN_MOMENTUM = 0.97  # = 1 - PyTorch's 0.03
@@ -89,7 +90,7 @@ class YoloConv(nn.Module):
     @nn.compact
     def __call__(self, x, train: bool = False):
         x = yolo_batch_norm(train, "bn")(PaddedConv(self.features, self.kernel, self.stride, name="conv")(x))
-        return jax.nn.silu(x) if self.act else x
+        return silu(x) if self.act else x
 
 
 def residual(x, y, shortcut: bool):

@@ -28,6 +28,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from .silu import silu
 from .yolo import YoloConv, max_pool_padded, max_pool_same, residual
 
 
@@ -41,7 +42,7 @@ class RepConvN(nn.Module):
     def __call__(self, x, train: bool = False):
         y = YoloConv(self.features, 3, self.stride, act=False, name="conv1")(x, train)
         y = y + YoloConv(self.features, 1, self.stride, act=False, name="conv2")(x, train)
-        return jax.nn.silu(y)
+        return silu(y)
 
 
 class RepBottleneck(nn.Module):

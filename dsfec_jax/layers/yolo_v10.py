@@ -32,6 +32,7 @@ import jax.numpy as jnp
 from jax import lax
 
 from .conv import DIMS
+from .silu import silu
 from .yolo import YoloConv, csp_chain, residual, torch_kernel_init, yolo_batch_norm
 
 
@@ -64,7 +65,7 @@ class YoloDWConv(nn.Module):
     @nn.compact
     def __call__(self, x, train: bool = False):
         x = yolo_batch_norm(train, "bn")(DepthwiseConv(self.kernel, self.stride, name="conv")(x))
-        return jax.nn.silu(x) if self.act else x
+        return silu(x) if self.act else x
 
 
 class SCDown(nn.Module):
@@ -86,7 +87,7 @@ class RepVGGDW(nn.Module):
     @nn.compact
     def __call__(self, x, train: bool = False):
         y = YoloDWConv(7, act=False, name="conv")(x, train) + YoloDWConv(3, act=False, name="conv1")(x, train)
-        return jax.nn.silu(y)
+        return silu(y)
 
 
 class CIB(nn.Module):

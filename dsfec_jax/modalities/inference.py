@@ -8,6 +8,16 @@ conv) and every assignment of trained variables into that form's variables, so `
 `self.network(self.variables, ...)` stays right). Folding is a few elementwise ops per layer, so
 re-assigning variables between validations stays cheap. Detectors that are not the zoo's (a NAS
 supernet's wrapper) and already folded ones run as they are.
+
+A predictor made for deployment (`constant_weights=True`: api.load, the eval and predict commands,
+`dsfec bench`) compiles its weights into the program as constants, as an ONNX graph holds its
+initializers. A call then passes the inputs alone (YOLOv8n's 126 weight arrays cost every call a
+fixed time to pass: docs/performance.md), and the stride-1 3x3 convs run as Winograd's products from
+kernels transformed once while tracing (layers/conv_product.py). The price is a longer first
+compile, and a fresh one for each new set of variables, which the persistent compilation cache
+cannot serve; so training's validation predictors keep the weights as arguments. Weights over
+CONSTANT_WEIGHTS_MAX_BYTES stay arguments too: the program would hold a second copy of them, and
+XLA's compile time grows with its constants.
 """
 
 from __future__ import annotations
@@ -16,6 +26,8 @@ import jax
 
 from .. import zoo
 
+CONSTANT_WEIGHTS_MAX_BYTES = 64 << 20  # YOLOv8s's 44 MB fits; YOLOv8m/l and Darknet-53 keep arguments
+
 
 class InferenceVariables:
     """Predictor mixin: in __init__, `self.detector = self._inference_detector(detector)`, then
@@ -23,6 +35,9 @@ class InferenceVariables:
 
     _form: zoo.InferenceForm | None = None
     _variables: dict | None = None
+    constant_weights: bool = False  # the weights compiled into the program (module docstring)
+    _with_weights = None  # the jitted network closed over the current variables, made on first call
+    _weights_fit = False  # the current variables are at most CONSTANT_WEIGHTS_MAX_BYTES
 
     def _inference_detector(self, detector):
         """The detector the jitted network runs for the trained `detector`."""
@@ -41,3 +56,21 @@ class InferenceVariables:
         converted = self._form.variables(trained) if convert else trained
         # on the device once: numpy weights would be converted again on every jitted call
         self._variables = None if converted is None else jax.device_put(converted)
+        self._with_weights = None
+        self._weights_fit = weight_bytes(self._variables) <= CONSTANT_WEIGHTS_MAX_BYTES
+
+    def call_network(self, *inputs):
+        """`self.network(self.variables, *inputs)`: the predictor's jitted network, with the weights
+        compiled in as constants where `constant_weights` is set and they fit."""
+        if not (self.constant_weights and self._weights_fit and self._variables is not None):
+            return self.network(self._variables, *inputs)
+        if self._with_weights is None:
+            # the function under the jit: called through the jitted one, its weights would be traced again
+            network, variables = getattr(self.network, "__wrapped__", self.network), self._variables
+            self._with_weights = jax.jit(lambda *args: network(variables, *args))
+        return self._with_weights(*inputs)
+
+
+def weight_bytes(variables) -> int:
+    """Bytes of every array in `variables` (None: 0)."""
+    return sum(leaf.nbytes for leaf in jax.tree_util.tree_leaves(variables))

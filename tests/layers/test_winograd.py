@@ -60,3 +60,27 @@ def test_the_kernel_gradient_is_36_batched_products():
     x, g = jnp.ones((1, 8, 8, 4)), jnp.ones((1, 8, 8, 6))
     text = str(jax.make_jaxpr(lambda x, g: winograd.conv3x3_kernel_grad(x, g, ((1, 1), (1, 1))))(x, g))
     assert "dot_general" in text and "f32[36,4,6]" in text
+
+
+@pytest.mark.parametrize("f", [winograd.F2, winograd.F4], ids=["F2", "F4"])
+@pytest.mark.parametrize("shape,cout,pads", SHAPES_PADS)
+def test_the_forward_from_a_transformed_kernel_equals_xlas(shape, cout, pads, f):
+    """The inference form's path: the kernel transformed once in float64 (numpy), then the tiles'
+    products; F2's error is a direct conv's own rounding, F4's a few times it."""
+    x = jax.random.normal(jax.random.key(6), shape)
+    w = jax.random.normal(jax.random.key(7), (3, 3, shape[-1], cout))
+    v = winograd.transformed_kernel(w, f)
+    assert v.shape == (f.span ** 2, shape[-1], cout) and v.dtype == np.float32
+    got = jax.jit(lambda x: winograd.conv3x3_transformed(x, v, pads, f))(x)
+    assert relative_max_error(got, plain_conv(x, w, pads)) < (2e-6 if f is winograd.F2 else 1e-5)
+    assert relative_max_error(jax.jit(lambda x, w: winograd.conv3x3(x, w, pads, f))(x, w), plain_conv(x, w, pads)) < 1e-5
+
+
+def test_a_wrong_f2_transform_fails_the_comparison():
+    x = jax.random.normal(jax.random.key(8), (1, 6, 7, 4))
+    w = jax.random.normal(jax.random.key(9), (3, 3, 4, 5))
+    pads = ((1, 1), (1, 1))
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(winograd, "B_T_2", np.roll(winograd.B_T_2, 1, axis=1))
+        got = winograd.conv3x3_transformed(x, winograd.transformed_kernel(w, winograd.F2), pads, winograd.F2)
+        assert relative_max_error(got, plain_conv(x, w, pads)) > 1e-2

@@ -50,3 +50,34 @@ def test_a_predictor_call_transfers_no_weight():
         again = predictor.run(inputs)
     for a, b in zip(first, again):
         np.testing.assert_array_equal(a, b)
+
+
+def test_a_deployed_predictor_compiles_its_weights_in_and_agrees_with_the_argument_form(monkeypatch):
+    """constant_weights=True (api.load, the commands, the bench): the program takes the input alone,
+    its stride-1 3x3 convs run as Winograd's products from kernels transformed once (the weights are
+    known while tracing), and its detections are the argument form's to float rounding. A new
+    assignment of variables drops the program."""
+    from dsfec_jax.layers import winograd
+    from dsfec_jax.modalities.rd.predict import RDPredictor
+
+    rep = RDRepresentation(fit="resize", input_hw=(64, 32))
+    det = zoo.create("yolov8n")
+    variables = zoo.model_variables(det, zoo.shipped_weights("yolov8n"))
+    sample = load_rd_samples("synthetic", "test", 1, seed=3)[0]
+    inputs = {k: rd_eval_inputs(sample, rep, det.config.classes)[k] for k in det.config.input_names}
+    calls = []
+    transformed = winograd.conv3x3_transformed
+    monkeypatch.setattr(winograd, "conv3x3_transformed", lambda *a: calls.append(a[1].shape) or transformed(*a))
+    argument_form = RDPredictor(det, variables, rep)
+    boxes, scores = argument_form.decoded(inputs)
+    assert not calls  # kernels traced as arguments: XLA's conv
+    deployed = RDPredictor(det, variables, rep, constant_weights=True)
+    got_boxes, got_scores = deployed.decoded(inputs)
+    assert calls and all(s[0] in (16, 36) for s in calls)
+    assert api.load("yolov8n").constant_weights
+    np.testing.assert_allclose(got_scores, scores, atol=1e-5)
+    np.testing.assert_allclose(got_boxes, boxes, atol=1e-4 * np.abs(boxes).max())
+    signature = next(line for line in deployed._with_weights.lower(inputs).as_text().splitlines() if "@main(" in line)
+    assert signature.count("%arg") == len(inputs)  # the input arrays alone, no weight
+    deployed.variables = variables
+    assert deployed._with_weights is None

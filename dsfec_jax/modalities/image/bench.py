@@ -50,7 +50,7 @@ def camera_pipeline(det, variables, runtime: str, size: int, workdir: Path, thre
     from .ort import OrtCameraPredictor
 
     if runtime == "jax":
-        return CameraPredictor(det, variables, size=size)
+        return CameraPredictor(det, variables, size=size, constant_weights=True)
     return OrtCameraPredictor(camera_onnx_graph(det, variables, workdir, runtime == "onnx-int8", input_hw),
                               threads=threads)
 

@@ -180,7 +180,7 @@ def _predictor(args, cfg, score_threshold: float):
     with progress.doing(LOADING.format(cfg.name)):
         detector, variables = weights_or_exit(args, cfg)
         return CameraPredictor(detector, variables, score_threshold=score_threshold, size=eval_size(args),
-                               class_map=mapping)
+                               class_map=mapping, constant_weights=True)
 
 
 def eval_or_predict(args, cfg) -> tuple:

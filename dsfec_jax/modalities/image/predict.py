@@ -136,14 +136,15 @@ class CameraPredictor(InferenceVariables, CameraPipeline):
 
     def __init__(self, detector, variables, size: int = 416, rect: bool = True,
                  score_threshold: float = EVAL_SCORE, nms_iou: float = NMS_IOU,
-                 max_detections: int = MAX_DETECTIONS, class_map: Mapping[str, str] | None = None):
+                 max_detections: int = MAX_DETECTIONS, class_map: Mapping[str, str] | None = None,
+                 constant_weights: bool = False):
         require_modality(detector.config, "image", "CameraPredictor")
         self.detector = self._inference_detector(detector)  # its inference form (modalities/inference.py)
-        self.variables = variables
+        self.variables, self.constant_weights = variables, constant_weights
         self._setup(detector.name, detector.config.classes, size, rect, score_threshold, nms_iou, max_detections,
                     class_map)
         self.network = jax.jit(decoding_network(self.detector))
 
     def decoded(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        boxes, scores = jax.device_get(self.network(self.variables, images))
+        boxes, scores = self.call_network(images)
         return np.asarray(boxes), np.asarray(scores)

@@ -67,7 +67,7 @@ def point_chains(name: str, runtimes: list[str], threads: int, workdir: Path, re
     from .predict import Predictor
 
     det, variables, label, points = model_setup(name)
-    jax_predictor = Predictor(det, variables, score_threshold=0.1)
+    jax_predictor = Predictor(det, variables, score_threshold=0.1, constant_weights=True)
     out = {}
     for rt in runtimes:
         predictor = point_predictor(det, variables, rt, workdir, threads, jax_predictor)

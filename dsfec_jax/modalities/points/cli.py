@@ -81,7 +81,7 @@ def _predictor(args, cfg, threshold: float):
             detector, variables = zoo.trained_detector(cfg, args.weights)
         except FileNotFoundError as err:
             sys.exit(f"dsfec {args.command}: {err} (--weights)")
-        return Predictor(detector, variables, score_threshold=threshold)
+        return Predictor(detector, variables, score_threshold=threshold, constant_weights=True)
 
 
 def eval_or_predict(args, cfg) -> tuple:

@@ -133,17 +133,17 @@ class Predictor(InferenceVariables, HostPipeline):
     footprints of its 3D boxes, at most 83 boxes a frame."""
 
     def __init__(self, detector, variables, score_threshold: float = 0.1, top_k: int | None = None,
-                 nms_iou: float | None = None, max_boxes: int | None = None):
+                 nms_iou: float | None = None, max_boxes: int | None = None, constant_weights: bool = False):
         cfg = detector.config
         given = {"top_k": top_k, "nms_iou": nms_iou, "max_boxes": max_boxes}
         options = {**zoo.family_of(cfg).points.predictor, **{k: v for k, v in given.items() if v is not None}}
         self.detector = self._inference_detector(detector)  # its inference form (modalities/inference.py)
-        self.variables = variables
+        self.variables, self.constant_weights = variables, constant_weights
         self._setup(PillarSpec.of(cfg), head_classes(cfg), score_threshold, options["nms_iou"], options["max_boxes"])
         self.network = jax.jit(decoded_network(self.detector, options["top_k"]))
 
     def run(self, batch: dict):
-        return jax.device_get(self.network(self.variables, fewest_slots(batch)))
+        return jax.device_get(self.call_network(fewest_slots(batch)))
 
 
 SLOT_BUCKET = 256  # the JAX predictor's pillar-slot sizes: 256, 512, 1024, ... up to max_pillars

@@ -55,7 +55,7 @@ def rd_predictor(det, variables, runtime: str, workdir: Path, threads: int, inpu
     from .predict import RDPredictor
 
     if runtime == "jax":
-        return RDPredictor(det, variables)
+        return RDPredictor(det, variables, constant_weights=True)
     return OrtRDPredictor(rd_onnx_graph(det, variables, workdir, runtime == "onnx-int8", input_hw), threads=threads)
 
 

@@ -90,7 +90,7 @@ def _predictor(args, cfg, score_threshold: float):
         return onnx_predictor(args, lambda export_dir: OrtRDPredictor(export_dir, score_threshold=score_threshold))
     with progress.doing(LOADING.format(cfg.name)):
         detector, variables = weights_or_exit(args, cfg)
-        return RDPredictor(detector, variables, score_threshold=score_threshold)
+        return RDPredictor(detector, variables, score_threshold=score_threshold, constant_weights=True)
 
 
 def eval_or_predict(args, cfg) -> tuple:

@@ -137,12 +137,12 @@ class RDPredictor(InferenceVariables, RDPipeline):
 
     def __init__(self, detector, variables, representation: RDRepresentation = RDRepresentation(),
                  score_threshold: float = EVAL_CONF, nms_iou: float = EVAL_IOU, max_detections: int = EVAL_MAX_DET,
-                 postprocess: str = "host"):
+                 postprocess: str = "host", constant_weights: bool = False):
         require_modality(detector.config, "rd", "RDPredictor")
         if postprocess not in ("host", "compiled"):
             raise ValueError(f"RDPredictor postprocess={postprocess!r}; expected 'host' or 'compiled'")
         self.detector = self._inference_detector(detector)  # its inference form (modalities/inference.py)
-        self.variables = variables
+        self.variables, self.constant_weights = variables, constant_weights
         self.classes, self.representation = tuple(detector.config.classes), representation
         self.input_names = detector.config.input_names
         self.score_threshold, self.nms_iou, self.max_detections = score_threshold, nms_iou, max_detections
@@ -155,4 +155,4 @@ class RDPredictor(InferenceVariables, RDPipeline):
 
     def decoded(self, inputs: dict):
         """The jitted network and decode (with `postprocess="compiled"` also the NMS), as numpy."""
-        return tuple(np.asarray(a) for a in jax.device_get(self.network(self.variables, inputs)))
+        return tuple(np.asarray(a) for a in self.call_network(inputs))  # np.asarray: no device_get's pytree pass

@@ -98,7 +98,8 @@ def test_predictor_runs_on_the_fewest_slots_that_hold_the_frame():
     used, cut = int(batch["mask"].any(-1).sum()), fewest_slots(batch)["mask"].shape[1]
     assert used <= cut < batch["mask"].shape[1] and (cut == SLOT_BUCKET or cut < 2 * used)
     # every slot, no bucketing: the same boxes and scores
-    decoded = jax.device_get(jax.jit(decoded_network(predictor.detector, 100))(predictor.variables, batch))
+    network = decoded_network(predictor.detector, 100)  # with the weights compiled in, as api.load's predictor runs
+    decoded = jax.device_get(jax.jit(lambda b: network(predictor.variables, b))(batch))
     want = predictor._postprocess(decoded[0][0], decoded[1][0], decoded[2][0])
     np.testing.assert_array_equal(sparse.scores, want.scores)
     np.testing.assert_array_equal(sparse.boxes.center, want.boxes.center)

@@ -181,7 +181,7 @@ def test_eval_keeps_the_papers_confidence_unless_told(monkeypatch, capsys):
         def predict_samples(self, samples, progress=False):
             return {s.sample_id: Boxes2D.empty(with_scores=True) for s in samples}
 
-    def fake_predictor(detector, variables, score_threshold):
+    def fake_predictor(detector, variables, score_threshold, **options):
         seen.append(score_threshold)
         return Quiet()
 
