@@ -114,7 +114,10 @@ def _switched(module, name: str, value):
 
 
 def _compiled(run):
-    run()  # traced and compiled now, under the settings in force
+    """`run` traced and compiled now, under the settings in force; `run.compile_s` the first call's time."""
+    t0 = time.perf_counter()
+    run()
+    run.compile_s = time.perf_counter() - t0
     return run
 
 
@@ -212,8 +215,12 @@ def main(argv=None) -> int:
              "constants": ("arguments", "constants"), "winograd": ("xla", "winograd"),
              "silu": ("exact", "rational")}[args.ab]
     for name in args.models.split(","):
-        r = interleaved(*forward_pair(name, HW.get(name), args.ab), args.rounds, args.per_round)
-        print(_line(name, r, *names), flush=True)
+        pair = forward_pair(name, HW.get(name), args.ab)
+        r = interleaved(*pair, args.rounds, args.per_round)
+        compiled = [getattr(fn, "compile_s", None) for fn in pair]
+        first_calls = ("; first call (compile) " + ", ".join(f"{n} {c:.1f} s" for n, c in zip(names, compiled))
+                       if None not in compiled else "")
+        print(_line(name, r, *names) + first_calls, flush=True)
     return 0
 
 

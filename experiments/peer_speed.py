@@ -78,7 +78,7 @@ def jax_train(model: str, batch: int, batches_out: str):
 def jax_forward(model: str, hw: tuple[int, int]):
     """fn() running the jitted inference network on one map or image of `hw` (a twinned model:
     the network its twin mirrors, on the case's input), its weights constants of the program as in
-    a predictor made with constant_weights=True."""
+    a predictor made with constant_weights=True (arguments over its size cap, as there)."""
     import jax
     import numpy as np
 
@@ -87,8 +87,7 @@ def jax_forward(model: str, hw: tuple[int, int]):
     if twin_export.family(model):
         twin = twin_export.case(model, hw)
         image = jax.device_put(twin.input)
-        run = jax.jit(lambda x: twin.run.__wrapped__(twin.variables, x))
-        return lambda: jax.block_until_ready(run(image))
+        return _deployed_call(twin.run.__wrapped__, twin.variables, image)
 
     detector = zoo.create(model)
     detector, variables = zoo.deploy(detector, detector.init(jax.random.key(0)))
@@ -96,7 +95,19 @@ def jax_forward(model: str, hw: tuple[int, int]):
     shapes = jax.eval_shape(lambda: detector.dummy_inputs(1))
     rng = np.random.default_rng(0)
     inputs = jax.device_put({k: rng.random((1, *hw, s.shape[-1]), np.float32) for k, s in shapes.items()})
-    net = jax.jit(lambda x: detector.apply(variables, x))
+    return _deployed_call(detector.apply, variables, inputs)
+
+
+def _deployed_call(network, variables, inputs):
+    """fn() running network(variables, inputs) jitted as a deployed predictor runs it."""
+    import jax
+
+    from dsfec_jax.modalities.inference import CONSTANT_WEIGHTS_MAX_BYTES, weight_bytes
+
+    if weight_bytes(variables) > CONSTANT_WEIGHTS_MAX_BYTES:
+        net = jax.jit(network)
+        return lambda: jax.block_until_ready(net(variables, inputs))
+    net = jax.jit(lambda x: network(variables, x))
     return lambda: jax.block_until_ready(net(inputs))
 
 

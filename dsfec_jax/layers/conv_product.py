@@ -31,7 +31,7 @@ MAX_PIXELS = 512  # output pixels at or below which the product form is used ...
 MIN_CHANNELS = 128  # ... when both the input and the output are at least this wide
 WINOGRAD_MIN_WEIGHTS = 32 * 24  # stride-1 3x3 convs with cin * cout from this on run as Winograd's products
 F4_MIN_SIDE = 4  # output rows and columns from which F(4x4, 3x3) beats F(2x2, 3x3) ...
-F4_MAX_WEIGHTS = 1 << 18  # ... while a kernel's cin * cout is at most this (F4 reads 36 copies of it, F2 16)
+F4_MAX_WEIGHTS = 1 << 17  # ... while a kernel's cin * cout is at most this (F4 reads 36 copies of it, F2 16)
 
 DENSE = (conv.Conv, yolo.PaddedConv)  # the zoo's dense conv modules; both call their input x_BxHxWxC
 
