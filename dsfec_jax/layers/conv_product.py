@@ -10,8 +10,10 @@ saves, so the conv stays XLA's there. The crossover, and the gain on whole netwo
 with `python -m experiments.bn_fold_speed --grid` and `--ab products` (docs/performance.md).
 
 `product_call(call)` runs a network's apply with every conv that fits (`fits`) computed this way,
-and every strided conv of a thin input (a stem) over blocks of its pixels
-(layers/conv_space_to_depth.py), through a flax method interceptor: nothing in the model changes,
+every strided conv of a thin input (a stem) over blocks of its pixels
+(layers/conv_space_to_depth.py), and, where the kernels are known while tracing (the weights
+compiled in as constants), every stride-1 3x3 conv as Winograd's products (`winograd_form`,
+layers/winograd.py), through a flax method interceptor: nothing in the model changes,
 so training, parameter counts and the ONNX export (where the runtime picks its own algorithm) keep
 the plain convs. It acts on the CPU backend only; elsewhere the call runs as it is.
 """

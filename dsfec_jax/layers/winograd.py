@@ -76,7 +76,7 @@ def conv3x3(x_BxHxWxI, w_3x3xIxO, pads: Pads, f: Minimal = F4):
     """The stride-1 3x3 convolution of x padded by `pads` ((top, bottom), (left, right), each >= 0)."""
     g = jnp.asarray(f.matrices()[1], x_BxHxWxI.dtype)
     v = jnp.einsum("ua,abio,vb->uvio", g, w_3x3xIxO, g).reshape(f.span * f.span, *w_3x3xIxO.shape[2:])
-    return conv3x3_transformed(x_BxHxWxI, v, pads, f)
+    return conv3x3_transformed(x_BxHxWxI, v, pads, f, stacked=False)
 
 
 def transformed_kernel(w_3x3xIxO, f: Minimal = F4) -> np.ndarray:
@@ -87,8 +87,11 @@ def transformed_kernel(w_3x3xIxO, f: Minimal = F4) -> np.ndarray:
     return v.reshape(f.span * f.span, *v.shape[2:]).astype(np.asarray(w_3x3xIxO).dtype)
 
 
-def conv3x3_transformed(x_BxHxWxI, v_SxIxO, pads: Pads, f: Minimal = F4):
-    """`conv3x3` of a kernel already transformed (`transformed_kernel`)."""
+def conv3x3_transformed(x_BxHxWxI, v_SxIxO, pads: Pads, f: Minimal = F4, stacked: bool = True):
+    """`conv3x3` of a kernel already transformed (`transformed_kernel`). `stacked`: each transform
+    pass one stacked array, which XLA emits as one fusion (the inference form's single image gains);
+    else one array per tile row, as training's backward has run (a batch of 8 on 48-96 px maps
+    measured mixed with the stacked form, so it stays)."""
     b, h, w, _ = x_BxHxWxI.shape
     cout = v_SxIxO.shape[-1]
     (top, bottom), (left, right) = pads
@@ -96,11 +99,16 @@ def conv3x3_transformed(x_BxHxWxI, v_SxIxO, pads: Pads, f: Minimal = F4):
     a_t = f.matrices()[0]
     span, tile = f.span, f.tile
     # the output rounded up to whole tiles; the extra rows read zeros and are cropped off
-    u, nh, nw = _input_tiles(x_BxHxWxI, pads, ho, wo, f)
+    u, nh, nw = _input_tiles(x_BxHxWxI, pads, ho, wo, f, stacked)
     m = jnp.einsum("uti,uio->uto", u, v_SxIxO).reshape(span, span, b, nh, nw, cout)
-    rows = jnp.stack(_combine([m[i] for i in range(span)], a_t))  # (tile, span, b, nh, nw, O)
-    tiles = jnp.stack(_combine([rows[:, j] for j in range(span)], a_t), -2)  # (tile, b, nh, nw, tile, O)
-    return tiles.transpose(1, 2, 0, 3, 4, 5).reshape(b, nh * tile, nw * tile, cout)[:, :ho, :wo]
+    if stacked:
+        rows = jnp.stack(_combine([m[i] for i in range(span)], a_t))  # (tile, span, b, nh, nw, O)
+        tiles = jnp.stack(_combine([rows[:, j] for j in range(span)], a_t), -2)  # (tile, b, nh, nw, tile, O)
+        tiles = tiles.transpose(1, 2, 0, 3, 4, 5)
+    else:
+        row_list = _combine([m[i] for i in range(span)], a_t)  # tile of (span, b, nh, nw, O)
+        tiles = jnp.stack([jnp.stack(_combine([r[j] for j in range(span)], a_t), 3) for r in row_list], 2)
+    return tiles.reshape(b, nh * tile, nw * tile, cout)[:, :ho, :wo]
 
 
 def conv3x3_input_grad(g_BxHoxWoxO, w_3x3xIxO, pads: Pads):
@@ -126,23 +134,26 @@ def conv3x3_kernel_grad(x_BxHxWxI, g_BxHoxWoxO, pads: Pads):
     return jnp.einsum("au,uvio,bv->abio", gt, m, gt)
 
 
-def _input_tiles(x_BxHxWxC, pads: Pads, ho: int, wo: int, f: Minimal = F4):
+def _input_tiles(x_BxHxWxC, pads: Pads, ho: int, wo: int, f: Minimal = F4, stacked: bool = False):
     """B^T d B of every span x span input tile that an (ho, wo) output, rounded up to whole
     tile x tile tiles, reads from x padded by `pads` -> ((span^2, tiles, C), nh, nw)."""
     (top, bottom), (left, right) = pads
     tile, span = f.tile, f.span
     nh, nw = -(-ho // tile), -(-wo // tile)
     xp = jnp.pad(x_BxHxWxC, ((0, 0), (top, bottom + tile * nh - ho), (left, right + tile * nw - wo), (0, 0)))
-    tiles = _tiles_2d(xp, f.matrices()[2], span, nh, nw, tile)
+    tiles = _tiles_2d(xp, f.matrices()[2], span, nh, nw, tile, stacked)
     return tiles.reshape(span * span, -1, x_BxHxWxC.shape[-1]), nh, nw
 
 
-def _tiles_2d(a_BxHxWxC, transform: np.ndarray, span: int, nh: int, nw: int, tile: int):
+def _tiles_2d(a_BxHxWxC, transform: np.ndarray, span: int, nh: int, nw: int, tile: int, stacked: bool = False):
     """`transform` (R x span) applied to every tile's rows and then its columns: tile (p, q)
-    reads rows tile*p .. tile*p + span - 1 and the same columns -> (R, R, B, nh, nw, C)."""
-    # each pass one stacked array, so that XLA emits it as one fusion rather than one per row
-    rows = jnp.stack(_combine(_strided(a_BxHxWxC, 1, span, nh, tile), transform))  # (R, B, nh, W, C)
-    return jnp.stack(_combine(_strided(rows, 3, span, nw, tile), transform), 1)
+    reads rows tile*p .. tile*p + span - 1 and the same columns -> (R, R, B, nh, nw, C).
+    `stacked`: each pass one stacked array (one XLA fusion), else one array per row."""
+    if stacked:
+        rows = jnp.stack(_combine(_strided(a_BxHxWxC, 1, span, nh, tile), transform))  # (R, B, nh, W, C)
+        return jnp.stack(_combine(_strided(rows, 3, span, nw, tile), transform), 1)
+    rows = _combine(_strided(a_BxHxWxC, 1, span, nh, tile), transform)
+    return jnp.stack([jnp.stack(_combine(_strided(r, 2, span, nw, tile), transform)) for r in rows])
 
 
 def _strided(a, axis: int, span: int, tiles: int, tile: int) -> list:
