@@ -61,14 +61,14 @@ def _blocks_pair(runtime, inputs):
     from dsfec_jax.layers import conv_space_to_depth
 
     detector, variables = runtime
-    shipped, pair = conv_space_to_depth.THIN_INPUT, []
-    for thin in (0, shipped):
-        conv_space_to_depth.THIN_INPUT = thin
-        run = _run(lambda v, x: detector.apply(v, x), jax.device_put(variables), inputs)  # its own jit cache
-        run()  # compiled now, under this setting
-        pair.append(run)
-    conv_space_to_depth.THIN_INPUT = shipped
-    return tuple(pair)
+    variables = jax.device_put(variables)
+
+    def plain(label: str):  # each its own function, so its own jit cache
+        return _compiled(_run(lambda v, x, _label=label: detector.apply(v, x), variables, inputs))
+
+    with _switched(conv_space_to_depth, "THIN_INPUT", 0):
+        first = plain("A")
+    return first, plain("B")
 
 
 def _constant_pair(runtime, inputs, ab: str):

@@ -87,7 +87,7 @@ def jax_forward(model: str, hw: tuple[int, int]):
     if twin_export.family(model):
         twin = twin_export.case(model, hw)
         image = jax.device_put(twin.input)
-        return _deployed_call(twin.run.__wrapped__, twin.variables, image)
+        return _deployed_call(twin.run, twin.variables, image)
 
     detector = zoo.create(model)
     detector, variables = zoo.deploy(detector, detector.init(jax.random.key(0)))
@@ -95,19 +95,16 @@ def jax_forward(model: str, hw: tuple[int, int]):
     shapes = jax.eval_shape(lambda: detector.dummy_inputs(1))
     rng = np.random.default_rng(0)
     inputs = jax.device_put({k: rng.random((1, *hw, s.shape[-1]), np.float32) for k, s in shapes.items()})
-    return _deployed_call(detector.apply, variables, inputs)
+    return _deployed_call(jax.jit(detector.apply), variables, inputs)
 
 
 def _deployed_call(network, variables, inputs):
-    """fn() running network(variables, inputs) jitted as a deployed predictor runs it."""
+    """fn() running the jitted network(variables, inputs) as a deployed predictor runs it."""
     import jax
 
-    from dsfec_jax.modalities.inference import CONSTANT_WEIGHTS_MAX_BYTES, weight_bytes
+    from dsfec_jax.modalities.inference import jit_with_weights
 
-    if weight_bytes(variables) > CONSTANT_WEIGHTS_MAX_BYTES:
-        net = jax.jit(network)
-        return lambda: jax.block_until_ready(net(variables, inputs))
-    net = jax.jit(lambda x: network(variables, x))
+    net = jit_with_weights(network, variables)
     return lambda: jax.block_until_ready(net(inputs))
 
 

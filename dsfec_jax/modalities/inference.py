@@ -37,7 +37,6 @@ class InferenceVariables:
     _variables: dict | None = None
     constant_weights: bool = False  # the weights compiled into the program (module docstring)
     _with_weights = None  # the jitted network closed over the current variables, made on first call
-    _weights_fit = False  # the current variables are at most CONSTANT_WEIGHTS_MAX_BYTES
 
     def _inference_detector(self, detector):
         """The detector the jitted network runs for the trained `detector`."""
@@ -57,18 +56,25 @@ class InferenceVariables:
         # on the device once: numpy weights would be converted again on every jitted call
         self._variables = None if converted is None else jax.device_put(converted)
         self._with_weights = None
-        self._weights_fit = weight_bytes(self._variables) <= CONSTANT_WEIGHTS_MAX_BYTES
 
     def call_network(self, *inputs):
         """`self.network(self.variables, *inputs)`: the predictor's jitted network, with the weights
         compiled in as constants where `constant_weights` is set and they fit."""
-        if not (self.constant_weights and self._weights_fit and self._variables is not None):
+        if not self.constant_weights or self._variables is None:
             return self.network(self._variables, *inputs)
         if self._with_weights is None:
-            # the function under the jit: called through the jitted one, its weights would be traced again
-            network, variables = getattr(self.network, "__wrapped__", self.network), self._variables
-            self._with_weights = jax.jit(lambda *args: network(variables, *args))
+            self._with_weights = jit_with_weights(self.network, self._variables)
         return self._with_weights(*inputs)
+
+
+def jit_with_weights(network, variables):
+    """`network` (jitted fn(variables, *inputs)) as fn(*inputs), `variables` compiled into the
+    program as constants, or passed as arguments where they exceed CONSTANT_WEIGHTS_MAX_BYTES."""
+    if weight_bytes(variables) > CONSTANT_WEIGHTS_MAX_BYTES:
+        return lambda *inputs: network(variables, *inputs)
+    # the function under the jit: called through the jitted one, the weights would be traced again
+    plain = getattr(network, "__wrapped__", network)
+    return jax.jit(lambda *inputs: plain(variables, *inputs))
 
 
 def weight_bytes(variables) -> int:
